@@ -1,0 +1,34 @@
+"""ament_python package: builds with colcon on a ROS 2 Jazzy install, or with pip."""
+
+from glob import glob
+
+from setuptools import setup
+
+PACKAGE = "rozyn_estimator"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=[PACKAGE, "sim_node"],
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+    ],
+    # Runtime dependencies come from package.xml (rosdep) or requirements.txt (pip);
+    # pinning them here would fight the ROS install.
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="rozyn_estimator maintainers",
+    maintainer_email="maintainers@users.noreply.h-seed-f02815f4.example",
+    description="Online vehicle inertial parameter estimation (Rozyn & Zhang) for ROS 2",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": [
+            "rozyn = rozyn_estimator.cli:main",
+            "estimator_node = rozyn_estimator.node:main",
+            "sim_node = sim_node.node:main",
+            "bag_recorder = rozyn_estimator.recorder:main",
+        ],
+    },
+)
