@@ -1,0 +1,203 @@
+"""Road profiles: ISO 8608 (thesis section 4-1-1) and Bogsjö's Laplace road (4-1-2).
+
+A road is a height ``h(s)`` [m] along the distance ``s`` [m]. It is generated once on
+a uniform grid (spacing at most ``dx_m``) as a periodic sum of cosines by an inverse FFT
+(eqs 4-1 to 4-7), and read at any distances by linear interpolation — so it streams:
+any block of positions can be asked for, in any order, and the answer does not depend
+on how a run is cut into blocks. The true road of the sim is the piecewise-linear
+profile through the grid points.
+
+- ``amplitudes="fixed"``: amplitude ``sqrt(2 Gd(n_i) dn)`` and a uniform random phase
+  per component (eq 4-6, the thesis' generator; nearly deterministic statistics).
+- ``amplitudes="gaussian"``: complex Gaussian coefficients with the same mean square, a
+  true (periodic) stationary Gaussian process.
+- ``kind="laplace"``: the ISO profile times a smooth envelope ``sqrt(Y_k)`` per section
+  of ``section_length_m``, ``Y_k ~ Gamma(shape 1/nu, scale nu)`` (mean 1, variance
+  nu): a generalised Laplace marginal with excess kurtosis ``3 nu``. The envelope
+  changes over ``envelope_ramp_m`` with a raised cosine, so the height has no steps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import fft as sfft
+
+from rozyn_estimator.errors import ConfigError
+
+ROAD_KINDS = ("iso", "laplace", "flat")
+AMPLITUDE_MODES = ("fixed", "gaussian")
+ISO_CLASSES = "ABCDEFGH"
+REFERENCE_CPM = 0.1  # n0 of ISO 8608 [cycles/m]
+DEFAULT_PERIOD_M = 200_000.0  # road length before a run that never ends repeats
+_CHUNK = 256  # Laplace sections drawn per random stream
+
+
+def iso_gd_n0_m3(road_class: str) -> float:
+    """Geometric-mean Gd(n0) of an ISO 8608 class: 16e-6 * 4**k m^3 (A..H)."""
+    key = str(road_class).strip().upper()
+    if len(key) != 1 or key not in ISO_CLASSES:
+        raise ConfigError(f"road_class: must be one of A..H, got {road_class!r}")
+    return 16e-6 * 4.0 ** ISO_CLASSES.index(key)
+
+
+@dataclass(frozen=True)
+class RoadSpec:
+    """What road to generate (all lengths in metres, spatial frequencies in cycles/m)."""
+
+    kind: str = "iso"
+    road_class: str = "A"
+    gd_n0_m3: float | None = None  # overrides road_class when set
+    waviness: float = 2.0  # w of eq 4-1
+    amplitudes: str = "fixed"
+    n_min_cpm: float = 0.01  # lowest spatial frequency (w = 2 diverges at 0)
+    n_max_cpm: float = 5.0
+    dx_m: float = 0.05
+    laplace_nu: float = 1.0
+    section_length_m: float = 100.0
+    envelope_ramp_m: float = 5.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in ROAD_KINDS:
+            raise ConfigError(f"road.kind: must be one of {', '.join(ROAD_KINDS)}, got {self.kind!r}")
+        if self.amplitudes not in AMPLITUDE_MODES:
+            raise ConfigError(
+                f"road.amplitudes: must be one of {', '.join(AMPLITUDE_MODES)}, got {self.amplitudes!r}"
+            )
+        iso_gd_n0_m3(self.road_class)
+        checks = {
+            "dx_m": self.dx_m > 0,
+            "n_min_cpm": self.n_min_cpm > 0,
+            "n_max_cpm": self.n_min_cpm < self.n_max_cpm < 0.5 / self.dx_m,
+            "waviness": 0 < self.waviness < 6,
+            "laplace_nu": self.laplace_nu >= 0,
+            "section_length_m": self.section_length_m > 0,
+            "envelope_ramp_m": 0 <= self.envelope_ramp_m <= self.section_length_m,
+            "gd_n0_m3": self.gd_n0_m3 is None or self.gd_n0_m3 > 0,
+        }
+        for name, ok in checks.items():
+            if not ok:
+                raise ConfigError(f"road.{name}: invalid value {getattr(self, name)!r} ({_RULES[name]})")
+
+    @property
+    def roughness_m3(self) -> float:
+        """Gd(n0) [m^3]."""
+        return self.gd_n0_m3 if self.gd_n0_m3 is not None else iso_gd_n0_m3(self.road_class)
+
+    def psd_m3(self, n_cpm: np.ndarray) -> np.ndarray:
+        """One-sided displacement PSD Gd(n) [m^3] (eq 4-1), zero outside [n_min, n_max]."""
+        n = np.asarray(n_cpm, dtype=float)
+        inside = (n >= self.n_min_cpm) & (n <= self.n_max_cpm)
+        with np.errstate(divide="ignore"):
+            g = self.roughness_m3 * (np.where(inside, n, 1.0) / REFERENCE_CPM) ** (-self.waviness)
+        return np.where(inside, g, 0.0) if self.kind != "flat" else np.zeros_like(n)
+
+
+_RULES = {
+    "dx_m": "must be > 0 m",
+    "n_min_cpm": "must be > 0 cycles/m",
+    "n_max_cpm": "must exceed n_min_cpm and stay below the grid's Nyquist 0.5/dx_m",
+    "waviness": "must lie in (0, 6)",
+    "laplace_nu": "must be >= 0 (0 is the Gaussian road)",
+    "section_length_m": "must be > 0 m",
+    "envelope_ramp_m": "must lie in [0, section_length_m]",
+    "gd_n0_m3": "must be > 0 m^3",
+}
+
+
+class Road:
+    """A seeded road profile, read at any distances.
+
+    Args:
+        spec: the road model.
+        seed: the random seed; equal seeds give equal roads.
+        period_m: the profile repeats after this distance; ``None`` for
+            ``DEFAULT_PERIOD_M``. A run of known length sets it to the distance its
+            record covers: then ``dn = 1 / L`` as in eq 4-7, and the components are
+            orthogonal over the record, as in the thesis.
+    """
+
+    def __init__(self, spec: RoadSpec, seed: int, period_m: float | None = None) -> None:
+        self.spec = spec
+        self.seed = int(seed)
+        period = DEFAULT_PERIOD_M if period_m is None else float(period_m)
+        if not period > 2.0 * spec.dx_m:
+            raise ConfigError(f"road period must exceed two grid steps, got {period!r} m")
+        n_grid = sfft.next_fast_len(int(np.ceil(period / spec.dx_m)), real=True)
+        self.period_m = period
+        self.dx_m = period / n_grid  # at most spec.dx_m
+        self._grid = self._base_profile(n_grid)
+        self._sections: dict[int, np.ndarray] = {}
+
+    def _base_profile(self, n_grid: int) -> np.ndarray:
+        """The periodic ISO profile on the grid (eqs 4-6, 4-7), via one inverse FFT."""
+        spec = self.spec
+        dn = 1.0 / self.period_m
+        k = np.arange(n_grid // 2 + 1)
+        gd = spec.psd_m3(k * dn)
+        rng = np.random.default_rng([self.seed, 0])
+        if spec.amplitudes == "fixed":
+            coeff = np.sqrt(2.0 * gd * dn) * np.exp(2j * np.pi * rng.random(k.size))
+        else:
+            coeff = np.sqrt(gd * dn) * (rng.standard_normal(k.size) + 1j * rng.standard_normal(k.size))
+        # irfft(X)[j] = (1/N) sum_k X_k e^{2 pi i k j / N} (hermitian) -> X_k = N/2 * coeff_k
+        return sfft.irfft(coeff * (n_grid / 2.0), n=n_grid)
+
+    def heights(self, s_m: np.ndarray) -> np.ndarray:
+        """Road height [m] at distances ``s_m`` [m] (any shape, any order)."""
+        s = np.asarray(s_m, dtype=float)
+        n_grid = self._grid.size
+        pos = np.mod(s / self.dx_m, n_grid)
+        i0 = np.floor(pos).astype(np.intp)
+        frac = pos - i0
+        i0 %= n_grid  # pos can round up to n_grid
+        h = self._grid[i0] * (1.0 - frac) + self._grid[(i0 + 1) % n_grid] * frac
+        if self.spec.kind == "laplace":
+            h = h * self.envelope(s)
+        return h
+
+    def envelope(self, s_m: np.ndarray) -> np.ndarray:
+        """The Laplace road's amplitude envelope sqrt(Y) at ``s_m`` (1 for ISO roads)."""
+        s = np.asarray(s_m, dtype=float)
+        spec = self.spec
+        if spec.kind != "laplace" or spec.laplace_nu == 0.0:
+            return np.ones_like(s)
+        length = spec.section_length_m
+        section = np.floor(s / length).astype(np.int64)
+        local = s - section * length
+        # Blend toward the neighbouring section within half a ramp of a boundary.
+        neighbour = np.where(local < 0.5 * length, section - 1, section + 1)
+        dist = np.minimum(local, length - local)  # to the nearest boundary
+        ramp = max(spec.envelope_ramp_m, 1e-12)  # a zero ramp is a plain step
+        t = np.clip(0.5 - dist / ramp, 0.0, 0.5)
+        weight = 0.5 * (1.0 - np.cos(np.pi * t))  # raised cosine, 0.5 on the boundary
+        own = self._section_amplitudes(section)
+        other = self._section_amplitudes(neighbour)
+        return own + (other - own) * weight
+
+    def _section_amplitudes(self, sections: np.ndarray) -> np.ndarray:
+        """sqrt(Y_k) for each section index k (integer array)."""
+        first = int(sections.min()) // _CHUNK
+        last = int(sections.max()) // _CHUNK
+        table = np.concatenate([self._chunk_amplitudes(c) for c in range(first, last + 1)])
+        return table[sections - first * _CHUNK]
+
+    def _chunk_amplitudes(self, chunk: int) -> np.ndarray:
+        """sqrt(Y) of the ``_CHUNK`` sections of one chunk.
+
+        Each chunk has a random stream keyed by its index, so any section can be asked
+        for first and its value never changes.
+        """
+        if chunk not in self._sections:
+            if len(self._sections) > 64:  # bounded memory on endless runs
+                self._sections.clear()
+            rng = np.random.default_rng([self.seed, 1, chunk & 0x7FFFFFFFFFFFFFFF])
+            nu = self.spec.laplace_nu
+            self._sections[chunk] = np.sqrt(rng.gamma(1.0 / nu, nu, size=_CHUNK))
+        return self._sections[chunk]
+
+    @property
+    def std_m(self) -> float:
+        """RMS height of the ISO base profile [m] (before any Laplace envelope)."""
+        return float(np.std(self._grid))

@@ -1,0 +1,109 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.linalg import expm
+
+from rozyn_estimator.vehicle import Vehicle
+from sim_node.halfcar import (
+    HalfCarPlant,
+    free_decay,
+    natural_modes,
+    second_order_model,
+    sensor_rows,
+    state_space,
+    static_state,
+)
+
+
+def test_matrices_follow_eqs_3_4_to_3_7_with_typos_fixed(vehicle):
+    m = second_order_model(vehicle)
+    lf, lr = 1.2, 1.6
+    assert np.allclose(m.stiffness, m.stiffness.T) and np.allclose(m.damping, m.damping.T)
+    # eq 3-6 prints l_f * c_s_r in row 2; the rear damper acts at l_r
+    assert m.damping[1, 3] == pytest.approx(lr * 3500.0)
+    assert m.stiffness[3, 3] == pytest.approx(lf**2 * 45000 + lr**2 * 80000)
+    assert m.stiffness[0, 0] == pytest.approx(245000.0)
+    assert np.allclose(np.diag(m.mass), [40, 65, 1000, 2000])
+    # a rigid heave of body and wheels with the road does not load the springs
+    q = np.array([1.0, 1.0, 1.0, 0.0])
+    assert np.allclose(m.stiffness @ q, m.tyre_stiffness @ [1.0, 1.0])
+
+
+def test_sensor_rows_use_lr_behind_the_cog(vehicle):
+    rows = sensor_rows(vehicle)
+    assert np.allclose(rows, [[0, 0, 1, 1.2], [0, 0, 1, -1.6]])  # eqs 3-8, 3-9 corrected
+
+
+def test_natural_modes_of_table_5_1(vehicle):
+    freq, zeta = natural_modes(vehicle)
+    assert freq[:2] == pytest.approx([1.288, 1.857], abs=2e-3)
+    assert zeta[:2] == pytest.approx([0.203, 0.174], abs=2e-3)
+    assert 9 < freq[2] < freq[3] < 13  # wheel hop
+
+
+def test_free_decay_equals_matrix_exponential(vehicle):
+    x0 = np.array([-0.015, -0.015, -0.03, 0.002, 0, 0, 0.1, 0])
+    dt, n = 0.005, 600
+    accel = free_decay(vehicle, x0, dt, n)
+    ss = state_space(vehicle)
+    ref = np.array([sensor_rows(vehicle) @ (ss.a @ expm(ss.a * k * dt) @ x0)[4:] for k in range(n)])
+    assert np.max(np.abs(accel - ref)) < 1e-10 * np.max(np.abs(ref))
+
+
+def _road(t):
+    w1, w2 = 2 * np.pi * 1.3, 2 * np.pi * 7.0
+    h = np.stack([0.01 * np.sin(w1 * t) + 0.003 * np.sin(w2 * t), 0.01 * np.sin(w1 * (t - 0.1))], -1)
+    dh = np.stack([0.01 * w1 * np.cos(w1 * t) + 0.003 * w2 * np.cos(w2 * t),
+                   0.01 * w1 * np.cos(w1 * (t - 0.1))], -1)
+    return h, dh
+
+
+def test_road_driven_response_matches_an_ode_solver(vehicle):
+    m = second_order_model(vehicle)
+    minv = np.linalg.inv(m.mass)
+
+    def qdd(t, x):
+        h, dh = _road(t)
+        return minv @ (m.tyre_stiffness @ h + m.tyre_damping @ dh - m.stiffness @ x[:4] - m.damping @ x[4:])
+
+    dt, t_end = 1e-3, 4.0
+    t = np.arange(0, t_end, dt)
+    x0 = static_state(vehicle, _road(0.0)[0])
+    sol = solve_ivp(lambda tt, x: np.concatenate([x[4:], qdd(tt, x)]), (0, t_end), x0,
+                    t_eval=t, rtol=1e-10, atol=1e-12, max_step=dt)
+    ref = np.array([sensor_rows(vehicle) @ qdd(tt, x) for tt, x in zip(t, sol.y.T, strict=True)])
+    plant = HalfCarPlant(vehicle, dt, x0=x0, u0=_road(0.0)[0])
+    accel = plant.run(_road(t)[0])
+    # first-order hold on a smooth road: error shrinks with dt^2; 1e-4 relative at 1 kHz
+    assert np.max(np.abs(accel - ref)) < 3e-4 * np.max(np.abs(ref))
+
+
+def test_blocks_concatenate_to_the_whole_run(vehicle):
+    rng = np.random.default_rng(0)
+    road = np.cumsum(rng.standard_normal((5000, 2)), axis=0) * 1e-4
+    whole = HalfCarPlant(vehicle, 0.002).run(road)
+    plant = HalfCarPlant(vehicle, 0.002)
+    parts = [plant.run(road[a:b]) for a, b in [(0, 1), (1, 1), (1, 777), (777, 5000)]]
+    # equal up to rounding (BLAS kernels differ with block length)
+    assert np.allclose(np.vstack(parts), whole, rtol=1e-12, atol=1e-15)
+
+
+def test_static_state_is_at_rest(vehicle):
+    u = np.array([0.02, -0.01])
+    plant = HalfCarPlant(vehicle, 0.01, x0=static_state(vehicle, u), u0=u)
+    assert np.max(np.abs(plant.run(np.tile(u, (200, 1))))) < 1e-9
+
+
+def test_bad_arguments(vehicle):
+    with pytest.raises(ValueError, match="dt_s"):
+        HalfCarPlant(vehicle, 0.0)
+    with pytest.raises(ValueError, match=r"\(n, 2\)"):
+        HalfCarPlant(vehicle, 0.01).run(np.zeros(10))
+
+
+def test_other_vehicle_modes_move():
+    heavy = Vehicle(sprung_mass_kg=1800.0, pitch_inertia_kgm2=3600.0, wheelbase_m=3.2,
+                    cog_from_front_axle_m=1.5)
+    assert natural_modes(heavy)[0][0] < natural_modes(Vehicle())[0][0]
