@@ -1,0 +1,286 @@
+"""One estimator update: accelerations of one window in, inertial parameters out.
+
+Pure functions over arrays (DESIGN.md, "The pipeline"):
+
+1. demean (removes gravity), correlation functions (section 2-1);
+2. state transition matrix and its modes (2-2, 2-3);
+3. the two body modes (frequency and damping bands, modal amplitude);
+4. measured A0 (eq 2-20) and a least-squares fit of m_s, I_yy, l_f (2-4);
+5. a covariance from the delete-one-block jackknife.
+
+A failure at any step is a ``failed`` status with a reason, never an exception and
+never a number.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from rozyn_estimator.correlation import correlation_sums
+from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.fit import FIT_KINDS, STIFFNESS_MODELS, axle_shapes, characteristic_matrix, fit_inertia
+from rozyn_estimator.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
+from rozyn_estimator.variance import jackknife_covariance
+from rozyn_estimator.vehicle import Vehicle
+
+PARAM_NAMES = ("mass_kg", "pitch_inertia_kgm2", "cog_from_front_axle_m")
+CORRELATIONS = ("multi-reference", "thesis-acf", "free-decay")
+VARIANCES = ("jackknife", "none")
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """Settings of one update. Times in s, frequencies in Hz."""
+
+    identifier: str = "state-transition"
+    gamma: int = 4  # eq 2-5: p = gamma 2n/m; correlation estimates are noisy (thesis: 4-6)
+    n_dof: int = 4  # n of eq 2-4 (the half car)
+    correlation: str = "multi-reference"  # see CORRELATIONS
+    max_lag_s: float = 1.0  # length of the correlation function used as free decay
+    min_lag_s: float = 0.0  # first lag used (>= 1 sample for multi-reference)
+    skip_wheelbase_delay: bool = True  # start after wheelbase/speed when the speed is known
+    freq_band_hz: tuple[float, float] = (0.5, 4.0)
+    damping_band: tuple[float, float] = (0.02, 0.9)
+    stiffness_model: str = "eq2-22"  # see fit.STIFFNESS_MODELS
+    fit: str = "modal"  # see fit.FIT_KINDS
+    variance: str = "jackknife"
+    jackknife_blocks: int = 10
+    min_duration_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        choices = {
+            "identifier": tuple(IDENTIFIERS),
+            "correlation": CORRELATIONS,
+            "stiffness_model": STIFFNESS_MODELS,
+            "fit": FIT_KINDS,
+            "variance": VARIANCES,
+        }
+        for name, options in choices.items():
+            if getattr(self, name) not in options:
+                raise ConfigError(
+                    f"pipeline.{name}: must be one of {', '.join(options)}, got {getattr(self, name)!r}"
+                )
+        rules = {
+            "gamma": (self.gamma >= 1, "must be >= 1"),
+            "n_dof": (self.n_dof >= 2, "must be >= 2"),
+            "max_lag_s": (self.max_lag_s > 0, "must be > 0 s"),
+            "min_lag_s": (self.min_lag_s >= 0, "must be >= 0 s"),
+            "jackknife_blocks": (self.jackknife_blocks >= 4, "must be >= 4"),
+            "min_duration_s": (self.min_duration_s > 0, "must be > 0 s"),
+            "freq_band_hz": (0 < self.freq_band_hz[0] < self.freq_band_hz[1], "needs 0 < min < max"),
+            "damping_band": (
+                0 <= self.damping_band[0] < self.damping_band[1] <= 1.0, "needs 0 <= min < max <= 1"
+            ),
+        }
+        for name, (ok, rule) in rules.items():
+            if not ok:
+                raise ConfigError(f"pipeline.{name}: {rule}, got {getattr(self, name)!r}")
+
+    @property
+    def p_blocks(self) -> int:
+        """p = gamma * 2n / m (eq 2-5) with m = 2 sensors."""
+        return math.ceil(self.gamma * 2 * self.n_dof / 2)
+
+    def replace(self, **changes: Any) -> PipelineConfig:
+        return dataclasses.replace(self, **changes)
+
+
+# Named methods (``rozyn trial --method``); the first is the default.
+METHODS: dict[str, PipelineConfig] = {
+    "rozyn": PipelineConfig(),
+    "rozyn-eq2-21": PipelineConfig(stiffness_model="eq2-21"),
+    "rozyn-condensed": PipelineConfig(stiffness_model="condensed"),
+    # The thesis' choices, with its equations implemented correctly.
+    "thesis": PipelineConfig(
+        gamma=2, correlation="thesis-acf", stiffness_model="eq2-21", fit="stiffness-block",
+        freq_band_hz=(1.0, 3.0), damping_band=(0.1, 0.5), skip_wheelbase_delay=False,
+    ),
+}
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Result of one update. ``params``/``covariance`` are None unless status is ok."""
+
+    status: str  # "ok" | "failed"
+    reason: str = ""
+    params: np.ndarray | None = None  # (3,) in PARAM_NAMES order
+    covariance: np.ndarray | None = None  # (3, 3), same order
+    modes: tuple[Mode, ...] = ()
+    a0: np.ndarray | None = None  # measured characteristic matrix (eq 2-20)
+    n_samples: int = 0
+    elapsed_ms: float = 0.0
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    @property
+    def std(self) -> np.ndarray | None:
+        return None if self.covariance is None else np.sqrt(np.diag(self.covariance))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (names of ``PARAM_NAMES``; None where there is no number)."""
+        out: dict[str, Any] = {"status": self.status, "reason": self.reason}
+        for i, name in enumerate(PARAM_NAMES):
+            out[name] = None if self.params is None else float(self.params[i])
+        out["covariance"] = None if self.covariance is None else self.covariance.tolist()
+        out["modes"] = [
+            {"freq_hz": md.freq_hz, "damping_ratio": md.damping_ratio} for md in self.modes
+        ]
+        out["elapsed_ms"] = self.elapsed_ms
+        if self.notes:
+            out["notes"] = list(self.notes)
+        return out
+
+
+class InputError(Exception):
+    """The window cannot be used (becomes a failed status)."""
+
+
+def estimate(
+    accel_mps2: np.ndarray,
+    fs_hz: float,
+    vehicle: Vehicle,
+    config: PipelineConfig | None = None,
+    speed_mps: float | None = None,
+) -> Estimate:
+    """Run one update on a window of paired accelerations.
+
+    Args:
+        accel_mps2: (n_samples, 2) front/rear vertical accelerations on a uniform grid
+            (gravity may be included: the mean is removed).
+        fs_hz: sample rate [Hz].
+        vehicle: known suspension, tyres and geometry (m, I, lf are not used).
+        config: pipeline settings.
+        speed_mps: vehicle speed, when known: the correlation lags shorter than the
+            wheelbase delay are then skipped.
+
+    Returns:
+        An :class:`Estimate`; status ``failed`` with a reason when no honest number exists.
+    """
+    cfg = config or PipelineConfig()
+    started = time.perf_counter()
+    y = np.asarray(accel_mps2)
+    n = int(y.shape[0]) if y.ndim >= 1 else 0
+    try:
+        y, dt = _checked(y, fs_hz, cfg)
+        first, last = _lag_range(cfg, fs_hz, vehicle, speed_mps)
+        if cfg.correlation == "free-decay":
+            params, modes = _first_or_raise(_identify_and_fit(y[None, None, first:], dt, vehicle, cfg))
+            return _done(started, n, vehicle, params, None, modes)
+        jackknife = cfg.variance == "jackknife"
+        blocks = cfg.jackknife_blocks if jackknife else 1
+        if n < blocks * (last + 1) or n < 4 * (last + 1):
+            raise InputError(
+                f"window too short for {cfg.max_lag_s:g} s of correlation lags in {blocks} blocks: "
+                f"{n / fs_hz:.1f} s"
+            )
+        sums = correlation_sums(y, last, blocks)
+        total = sums.sum(axis=0)
+        records = [total]
+        if jackknife:
+            # Replicate b: the record without block b's lagged products.
+            records += [total - sums[b] for b in range(blocks)]
+        decays = np.stack([_decays(r, first, cfg) for r in records])
+        params, modes = _first_or_raise(_identify_and_fit(decays[:1], dt, vehicle, cfg))
+        if not jackknife:
+            return _done(started, n, vehicle, params, None, modes)
+        fits = _identify_and_fit(decays[1:], dt, vehicle, cfg, near=modes)
+        replicates = np.array([np.full(3, np.nan) if isinstance(f, Exception) else f[0] for f in fits])
+        cov, good = jackknife_covariance(replicates, params)
+        if cov is None:
+            raise IdentificationError(
+                f"unstable identification: only {good} of {blocks} jackknife replicates found the modes"
+            )
+        notes = () if good == blocks else (f"{blocks - good} of {blocks} jackknife replicates failed",)
+        return _done(started, n, vehicle, params, cov, modes, notes)
+    except (InputError, IdentificationError, np.linalg.LinAlgError) as exc:
+        return Estimate(
+            status="failed", reason=str(exc), n_samples=n,
+            elapsed_ms=(time.perf_counter() - started) * 1e3,
+        )
+
+
+def _checked(y: np.ndarray, fs_hz: float, cfg: PipelineConfig) -> tuple[np.ndarray, float]:
+    if not (isinstance(fs_hz, int | float) and math.isfinite(fs_hz) and fs_hz > 0):
+        raise InputError(f"sample rate must be a positive number, got {fs_hz!r}")
+    if y.ndim != 2 or y.shape[1] != 2:
+        raise InputError(f"expected accelerations of shape (n, 2), got {y.shape}")
+    if not np.issubdtype(y.dtype, np.number) or np.iscomplexobj(y):
+        raise InputError(f"expected real numbers, got dtype {y.dtype}")
+    y = y.astype(float, copy=False)
+    if not np.all(np.isfinite(y)):
+        raise InputError(f"{int(np.sum(~np.isfinite(y)))} samples are NaN or Inf")
+    if y.shape[0] < cfg.min_duration_s * fs_hz:
+        raise InputError(f"window too short: {y.shape[0] / fs_hz:.2f} s < {cfg.min_duration_s:g} s")
+    y = y - y.mean(axis=0)
+    for i, name in enumerate(("front", "rear")):
+        if not np.any(np.abs(y[:, i]) > 1e-9):
+            raise InputError(f"{name} channel is constant: no vibration to identify")
+    return y, 1.0 / fs_hz
+
+
+def _lag_range(cfg: PipelineConfig, fs_hz: float, v: Vehicle, speed_mps: float | None) -> tuple[int, int]:
+    """(first, last) correlation lag in samples."""
+    first_s = cfg.min_lag_s
+    if cfg.skip_wheelbase_delay and speed_mps is not None and speed_mps > 0:
+        first_s = max(first_s, v.wheelbase_m / speed_mps)
+    first = math.ceil(first_s * fs_hz - 1e-9)
+    if cfg.correlation == "multi-reference":
+        first = max(first, 1)  # lag 0 carries the sensor noise variance
+    return first, first + round(cfg.max_lag_s * fs_hz)
+
+
+def _decays(corr: np.ndarray, first: int, cfg: PipelineConfig) -> np.ndarray:
+    """(n_refs, n_lags, 2) free-decay sequences from (lags, 2, 2) correlation sums."""
+    if cfg.correlation == "thesis-acf":
+        acf = np.column_stack([corr[:, 0, 0] / corr[0, 0, 0], corr[:, 1, 1] / corr[0, 1, 1]])
+        return acf[None, first:]
+    return corr[first:].transpose(2, 0, 1)  # reference j: [R_fj(tau), R_rj(tau)]
+
+
+Fit = tuple[np.ndarray, tuple[Mode, ...]] | IdentificationError
+
+
+def _identify_and_fit(
+    decays: np.ndarray, dt: float, v: Vehicle, cfg: PipelineConfig, near: tuple[Mode, ...] | None = None
+) -> list[Fit]:
+    """Identify and fit each record of a (batch, refs, lags, 2) stack of decays.
+
+    The first record picks its body modes by amplitude; with ``near``, every record
+    takes the modes closest to those instead.
+    """
+    out: list[Fit] = []
+    for modes in IDENTIFIERS[cfg.identifier](decays, dt, cfg.p_blocks):
+        try:
+            body = select_body_modes(modes, cfg.freq_band_hz, cfg.damping_band, near=near)
+            out.append((fit_inertia(v, body, cfg.stiffness_model, cfg.fit), tuple(body)))
+        except IdentificationError as exc:
+            out.append(exc)
+    return out
+
+
+def _first_or_raise(fits: list[Fit]) -> tuple[np.ndarray, tuple[Mode, ...]]:
+    if isinstance(fits[0], IdentificationError):
+        raise fits[0]
+    return fits[0]
+
+
+def _done(
+    started: float, n: int, v: Vehicle, params: np.ndarray, cov: np.ndarray | None,
+    modes: tuple[Mode, ...], notes: tuple[str, ...] = (),
+) -> Estimate:
+    poles = np.array([md.eigenvalue for md in modes])
+    return Estimate(
+        status="ok", params=params, covariance=cov, modes=modes,
+        a0=characteristic_matrix(poles, axle_shapes(v, modes)), n_samples=n,
+        elapsed_ms=(time.perf_counter() - started) * 1e3, notes=notes,
+    )
