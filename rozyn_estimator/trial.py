@@ -1,0 +1,207 @@
+"""Simulated trials: one seeded run of the half car through the estimator.
+
+The workhorse of ``rozyn trial``, the study, the method comparison and the benchmark.
+As a tool it imports both the plant (``sim_node``) and the estimator; the estimator's
+own modules never import the plant (DESIGN.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+from collections.abc import Iterable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.pipeline import METHODS, PARAM_NAMES, Estimate, PipelineConfig, estimate
+from rozyn_estimator.vehicle import Vehicle
+from sim_node.road import RoadSpec
+from sim_node.simulation import SimConfig, Simulation
+
+TRIAL_ROADS = ("iso", "laplace", "free-decay")
+
+
+@dataclass(frozen=True)
+class TrialSpec:
+    """The conditions of a trial; the seed picks the road."""
+
+    road: str = "iso"
+    road_class: str = "A"
+    amplitudes: str = "fixed"
+    laplace_nu: float = 1.0
+    waviness: float = 2.0
+    speed_kmh: float = 100.0
+    duration_s: float = 100.0
+    rate_hz: float = 100.0
+    noise_std_mps2: float = 0.0
+    vehicle: Vehicle = field(default_factory=Vehicle)
+    method: str = "rozyn"
+    pipeline: PipelineConfig | None = None  # overrides the method's settings
+
+    def __post_init__(self) -> None:
+        if self.road not in TRIAL_ROADS:
+            raise ConfigError(f"road: must be one of {', '.join(TRIAL_ROADS)}, got {self.road!r}")
+        if self.method not in METHODS:
+            raise ConfigError(f"method: must be one of {', '.join(METHODS)}, got {self.method!r}")
+        if not self.duration_s > 0:
+            raise ConfigError(f"duration_s: must be > 0 s, got {self.duration_s!r}")
+        self.sim_config(0)  # validates road and sim settings
+
+    def sim_config(self, seed: int) -> SimConfig:
+        if self.road == "free-decay":
+            road = RoadSpec(kind="flat")
+        else:
+            road = RoadSpec(
+                kind=self.road, road_class=self.road_class, amplitudes=self.amplitudes,
+                laplace_nu=self.laplace_nu, waviness=self.waviness,
+            )
+        return SimConfig(
+            vehicle=self.vehicle, road=road, seed=seed, speed_kmh=self.speed_kmh,
+            rate_hz=self.rate_hz, noise_std_mps2=self.noise_std_mps2, duration_s=self.duration_s,
+        )
+
+    def pipeline_config(self) -> PipelineConfig:
+        cfg = self.pipeline or METHODS[self.method]
+        if self.road == "free-decay":
+            # The signal is itself the free decay (thesis section 5-1): no correlation.
+            cfg = cfg.replace(
+                correlation="free-decay", variance="none", min_duration_s=min(cfg.min_duration_s, 0.5)
+            )
+        return cfg
+
+    def replace(self, **changes: Any) -> TrialSpec:
+        return dataclasses.replace(self, **changes)
+
+    @property
+    def truth(self) -> np.ndarray:
+        v = self.vehicle
+        return np.array([v.sprung_mass_kg, v.pitch_inertia_kgm2, v.cog_from_front_axle_m])
+
+
+@dataclass(frozen=True)
+class TrialResult:
+    seed: int
+    estimate: Estimate
+    truth: np.ndarray
+    sim_ms: float
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record of ``rozyn trial --json``."""
+        out = {"seed": self.seed}
+        out.update(self.estimate.to_dict())
+        out["truth"] = dict(zip(PARAM_NAMES, self.truth.tolist(), strict=True))
+        return out
+
+
+def run_trial(spec: TrialSpec, seed: int) -> TrialResult:
+    """Simulate one seeded run and estimate from it."""
+    started = time.perf_counter()
+    sim = Simulation(spec.sim_config(seed))
+    block = sim.run(spec.duration_s)
+    sim_ms = (time.perf_counter() - started) * 1e3
+    est = estimate(
+        block.accel_mps2, spec.rate_hz, spec.vehicle, spec.pipeline_config(),
+        speed_mps=float(np.mean(block.speed_mps)),
+    )
+    return TrialResult(seed=seed, estimate=est, truth=spec.truth, sim_ms=sim_ms)
+
+
+def _run_trial_args(args: tuple[TrialSpec, int]) -> TrialResult:
+    return run_trial(*args)
+
+
+def limit_threads() -> None:
+    """One BLAS thread per process: the matrices are tiny and processes run in parallel."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1)
+
+
+def default_jobs() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def run_trials(
+    spec: TrialSpec, seeds: Sequence[int], jobs: int | None = None, progress: bool = False
+) -> Iterator[TrialResult]:
+    """Trials for each seed, in seed order, on ``jobs`` processes (default: all cores)."""
+    jobs = default_jobs() if jobs is None else max(1, int(jobs))
+    work = [(spec, int(s)) for s in seeds]
+    bar = _progress(len(work), progress)
+    try:
+        if jobs == 1 or len(work) <= 1:
+            limit_threads()
+            for item in work:
+                yield _run_trial_args(item)
+                bar.update(1)
+            return
+        chunk = max(1, min(16, len(work) // (4 * jobs)))
+        with ProcessPoolExecutor(max_workers=jobs, initializer=limit_threads) as pool:
+            for result in pool.map(_run_trial_args, work, chunksize=chunk):
+                yield result
+                bar.update(1)
+    finally:
+        bar.close()
+
+
+def _progress(total: int, enabled: bool) -> Any:
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="trial", disable=not enabled, leave=False, dynamic_ncols=True)
+
+
+def parse_seeds(text: str) -> list[int]:
+    """``"7"``, ``"1-100"``, ``"1,5,9-12"`` -> list of seeds (>= 0)."""
+    seeds: list[int] = []
+    try:
+        for part in text.split(","):
+            lo, _, hi = part.strip().partition("-")
+            first, last = int(lo), int(hi) if hi else int(lo)
+            if first < 0 or last < first:
+                raise ValueError
+            seeds.extend(range(first, last + 1))
+    except ValueError:
+        raise ConfigError(f"seeds: expected N, A-B or a comma list of those (N >= 0), got {text!r}") from None
+    return seeds
+
+
+@dataclass(frozen=True)
+class Summary:
+    """Statistics of a set of trials, per parameter in PARAM_NAMES order."""
+
+    n: int
+    failures: int
+    truth: np.ndarray
+    mean: np.ndarray
+    std: np.ndarray
+    bias_pct: np.ndarray
+    within_6pct: np.ndarray  # share of successful trials within 6 % of truth
+    mean_reported_std: np.ndarray  # NaN when no covariance was reported
+    median_ms: float
+
+
+def summarise(results: Iterable[TrialResult]) -> Summary:
+    results = list(results)
+    ok = [r for r in results if r.estimate.ok]
+    truth = results[0].truth if results else np.full(3, np.nan)
+    if not ok:
+        nan = np.full(3, np.nan)
+        return Summary(len(results), len(results), truth, nan, nan, nan, nan, nan, float("nan"))
+    p = np.array([r.estimate.params for r in ok])
+    stds = np.array([r.estimate.std if r.estimate.std is not None else np.full(3, np.nan) for r in ok])
+    return Summary(
+        n=len(results),
+        failures=len(results) - len(ok),
+        truth=truth,
+        mean=p.mean(axis=0),
+        std=p.std(axis=0, ddof=1) if len(ok) > 1 else np.zeros(3),
+        bias_pct=(p.mean(axis=0) / truth - 1.0) * 100.0,
+        within_6pct=np.mean(np.abs(p / truth - 1.0) <= 0.06, axis=0),
+        mean_reported_std=np.sqrt(np.mean(stds**2, axis=0)),
+        median_ms=float(np.median([r.estimate.elapsed_ms for r in ok])),
+    )
