@@ -1,12 +1,18 @@
-"""``rozyn``: the command-line tools (trial, bench, …).
+"""``rozyn``: the command-line tools (trial, demo, bench, and the tool modules).
 
 Errors a user can act on (bad options, files, bags) print one line to stderr and exit
 with status 1; usage errors exit with 2 (argparse).
+
+Larger tools live in their own module and are found by name (``TOOL_MODULES``): each
+defines ``HELP`` (one line), ``DESCRIPTION``, ``add_arguments(parser)`` and
+``run(args) -> int``.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
+import importlib.util
 import json
 import sys
 from collections.abc import Callable, Sequence
@@ -14,6 +20,7 @@ from collections.abc import Callable, Sequence
 from rozyn_estimator.errors import RozynError
 
 Command = Callable[[argparse.Namespace], int]
+TOOL_MODULES = ("replay", "study", "compare")  # rozyn_estimator.<name>
 
 
 def _add_vehicle(p: argparse.ArgumentParser) -> None:
@@ -152,6 +159,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="time the simulator and the pipeline (JSON)")
     p.add_argument("--repeats", type=int, default=20, help="timing repeats (default: 20)")
     p.set_defaults(func=cmd_bench)
+
+    for name in TOOL_MODULES:
+        module_name = f"rozyn_estimator.{name}"
+        if importlib.util.find_spec(module_name) is None:
+            continue
+        module = importlib.import_module(module_name)
+        p = sub.add_parser(name, help=module.HELP, description=module.DESCRIPTION)
+        module.add_arguments(p)
+        p.set_defaults(func=module.run)
     return parser
 
 
