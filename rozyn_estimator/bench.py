@@ -51,6 +51,7 @@ def run_bench(repeats: int = 20) -> dict[str, Any]:
         "update_120s_window_no_variance_ms": _median_ms(
             lambda: estimate(accel, 100.0, vehicle, PipelineConfig(variance="none"), speed), repeats),
         "trial_100s_iso_ms": _median_ms(lambda: _trial(), max(3, repeats // 4)),
+        "study_trials_per_second": _study_trials_per_second(max(1, repeats // 10)),
     }
     out["peak_rss_mb"] = _peak_rss_mb()
     out["goals"] = {"sim_100s_at_100hz_ms": 20.0, "update_120s_window_ms": 10.0}
@@ -62,3 +63,9 @@ def _trial() -> None:
 
     run_trial(TrialSpec(), 1)
 
+
+def _study_trials_per_second(repeats: int) -> float:
+    """One core over the thesis grid's mix of measurement times (``rozyn study``)."""
+    from rozyn_estimator.study import bench_trials_per_second
+
+    return bench_trials_per_second(repeats)
