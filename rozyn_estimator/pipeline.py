@@ -6,7 +6,11 @@ Pure functions over arrays (DESIGN.md, "The pipeline"):
 2. state transition matrix and its modes (2-2, 2-3);
 3. the two body modes (frequency and damping bands, modal amplitude);
 4. measured A0 (eq 2-20) and a least-squares fit of m_s, I_yy, l_f (2-4);
-5. a covariance from the delete-one-block jackknife.
+5. a covariance from the delete-one-block jackknife;
+6. (``refine="likelihood"``, the default) a frequency-domain maximum-likelihood fit of
+   the whole half car started from that estimate (``likelihood.py``), with the Fisher
+   covariance. Rozyn's estimate stays on the result (``Estimate.rozyn``); if the
+   refinement fails, Rozyn's estimate is published with a warning.
 
 A failure at any step is a ``failed`` status with a reason, never an exception and
 never a number.
@@ -26,12 +30,14 @@ from rozyn_estimator.correlation import correlation_sums
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.fit import FIT_KINDS, STIFFNESS_MODELS, axle_shapes, characteristic_matrix, fit_inertia
 from rozyn_estimator.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
+from rozyn_estimator.likelihood import LikelihoodConfig, Refinement, refine
 from rozyn_estimator.variance import jackknife_covariance
 from rozyn_estimator.vehicle import Vehicle
 
 PARAM_NAMES = ("mass_kg", "pitch_inertia_kgm2", "cog_from_front_axle_m")
 CORRELATIONS = ("multi-reference", "thesis-acf", "free-decay")
 VARIANCES = ("jackknife", "none")
+REFINES = ("likelihood", "none")
 
 
 @dataclass(frozen=True)
@@ -52,6 +58,8 @@ class PipelineConfig:
     variance: str = "jackknife"
     jackknife_blocks: int = 10
     min_duration_s: float = 5.0
+    refine: str = "likelihood"  # see REFINES: the stage after Rozyn's pipeline
+    likelihood: LikelihoodConfig = field(default_factory=LikelihoodConfig)
 
     def __post_init__(self) -> None:
         choices = {
@@ -60,6 +68,7 @@ class PipelineConfig:
             "stiffness_model": STIFFNESS_MODELS,
             "fit": FIT_KINDS,
             "variance": VARIANCES,
+            "refine": REFINES,
         }
         for name, options in choices.items():
             if getattr(self, name) not in options:
@@ -81,6 +90,11 @@ class PipelineConfig:
         for name, (ok, rule) in rules.items():
             if not ok:
                 raise ConfigError(f"pipeline.{name}: {rule}, got {getattr(self, name)!r}")
+        if self.refine == "likelihood" and self.correlation == "free-decay":
+            raise ConfigError(
+                "pipeline.refine: the likelihood refinement models a road-driven response; "
+                "use refine='none' with correlation='free-decay'"
+            )
 
     @property
     def p_blocks(self) -> int:
@@ -91,22 +105,40 @@ class PipelineConfig:
         return dataclasses.replace(self, **changes)
 
 
-# Named methods (``rozyn trial --method``); the first is the default.
+# Named methods (``rozyn trial --method``, ``rozyn compare --methods``). ``PipelineConfig()``
+# (the pipeline's default) is ``likelihood``; the ``rozyn*`` and ``thesis`` methods are
+# Rozyn's pipeline alone.
 METHODS: dict[str, PipelineConfig] = {
-    "rozyn": PipelineConfig(),
-    "rozyn-eq2-21": PipelineConfig(stiffness_model="eq2-21"),
-    "rozyn-condensed": PipelineConfig(stiffness_model="condensed"),
+    "rozyn": PipelineConfig(refine="none"),
+    "rozyn-eq2-21": PipelineConfig(stiffness_model="eq2-21", refine="none"),
+    "rozyn-condensed": PipelineConfig(stiffness_model="condensed", refine="none"),
     # The thesis' choices, with its equations implemented correctly.
     "thesis": PipelineConfig(
         gamma=2, correlation="thesis-acf", stiffness_model="eq2-21", fit="stiffness-block",
-        freq_band_hz=(1.0, 3.0), damping_band=(0.1, 0.5), skip_wheelbase_delay=False,
+        freq_band_hz=(1.0, 3.0), damping_band=(0.1, 0.5), skip_wheelbase_delay=False, refine="none",
     ),
+    # Rozyn's pipeline, then the Whittle fit of the half car (likelihood.py).
+    "likelihood": PipelineConfig(),
+    # ... on the auto-spectra only (for comparison: the cross-spectrum carries most information).
+    # Without the cross-spectrum, a free road shape is too close to the transfer functions'.
+    "likelihood-auto": PipelineConfig(likelihood=LikelihoodConfig(spectra="auto", road_shape_terms=0)),
+    # ... with the road's waviness and the suspension stiffness and damping as nuisance parameters.
+    "likelihood-nuisance": PipelineConfig(likelihood=LikelihoodConfig(estimate_suspension=True)),
 }
 
 
 @dataclass(frozen=True)
 class Estimate:
-    """Result of one update. ``params``/``covariance`` are None unless status is ok."""
+    """Result of one update. ``params``/``covariance`` are None unless status is ok.
+
+    ``stage`` names the stage whose numbers ``params``/``covariance`` are: ``rozyn``
+    (Rozyn's pipeline) or ``likelihood`` (the refinement). When a refinement was
+    configured, ``rozyn`` holds Rozyn's own estimate (its start) and ``refinement`` the
+    fit's details (nuisance parameters, ℓ, iterations); ``modes`` and ``a0`` are always
+    Rozyn's. ``notes`` are what a user should look at (the online code raises them as
+    diagnostics warnings): e.g. a failed refinement (Rozyn's estimate is then published),
+    or a failed Rozyn stage that the refinement stood in for.
+    """
 
     status: str  # "ok" | "failed"
     reason: str = ""
@@ -117,10 +149,18 @@ class Estimate:
     n_samples: int = 0
     elapsed_ms: float = 0.0
     notes: tuple[str, ...] = field(default=())
+    stage: str = "rozyn"
+    rozyn: Estimate | None = None
+    refinement: Refinement | None = None
 
     @property
     def ok(self) -> bool:
         return self.status == "ok"
+
+    @property
+    def rozyn_stage(self) -> Estimate:
+        """Rozyn's pipeline's estimate (this one when no refinement was configured)."""
+        return self.rozyn if self.rozyn is not None else self
 
     @property
     def std(self) -> np.ndarray | None:
@@ -136,8 +176,17 @@ class Estimate:
             {"freq_hz": md.freq_hz, "damping_ratio": md.damping_ratio} for md in self.modes
         ]
         out["elapsed_ms"] = self.elapsed_ms
+        out["stage"] = self.stage
         if self.notes:
             out["notes"] = list(self.notes)
+        if self.rozyn is not None:
+            r = self.rozyn
+            out["rozyn"] = {"status": r.status, "reason": r.reason, "elapsed_ms": r.elapsed_ms}
+            for i, name in enumerate(PARAM_NAMES):
+                out["rozyn"][name] = None if r.params is None else float(r.params[i])
+            out["rozyn"]["covariance"] = None if r.covariance is None else r.covariance.tolist()
+        if self.refinement is not None:
+            out["refinement"] = self.refinement.to_dict()
         return out
 
 
@@ -150,7 +199,8 @@ def estimate(
     fs_hz: float,
     vehicle: Vehicle,
     config: PipelineConfig | None = None,
-    speed_mps: float | None = None,
+    speed_mps: float | np.ndarray | None = None,
+    warm_start: Estimate | np.ndarray | None = None,
 ) -> Estimate:
     """Run one update on a window of paired accelerations.
 
@@ -160,22 +210,51 @@ def estimate(
         fs_hz: sample rate [Hz].
         vehicle: known suspension, tyres and geometry (m, I, lf are not used).
         config: pipeline settings.
-        speed_mps: vehicle speed, when known: the correlation lags shorter than the
-            wheelbase delay are then skipped.
+        speed_mps: vehicle speed [m/s], when known: a number, or one per sample (the
+            refinement then models the varying wheelbase delay; Rozyn's stage uses the
+            mean). Rozyn's stage skips the correlation lags shorter than the wheelbase
+            delay; the likelihood refinement needs it.
+        warm_start: the previous window's estimate (or its ``(m, I, lf)``): the
+            refinement starts from it as well as from Rozyn's estimate, and stands in for
+            Rozyn's if that fails.
 
     Returns:
         An :class:`Estimate`; status ``failed`` with a reason when no honest number exists.
     """
     cfg = config or PipelineConfig()
     started = time.perf_counter()
-    y = np.asarray(accel_mps2)
+    speed, profile = _speed(speed_mps)
+    rozyn, y = _rozyn_stage(np.asarray(accel_mps2), fs_hz, vehicle, cfg, speed, started)
+    if cfg.refine == "none" or y is None:
+        return rozyn
+    return _refined(rozyn, y, fs_hz, vehicle, cfg, profile, warm_start, started)
+
+
+def _speed(speed_mps: float | np.ndarray | None) -> tuple[float | None, float | np.ndarray | None]:
+    """(mean speed, speed for the refinement), None where it is unknown."""
+    if speed_mps is None:
+        return None, None
+    v = np.asarray(speed_mps, dtype=float)
+    if v.size == 0 or not np.all(np.isfinite(v)) or not np.all(v > 0):
+        return None, None
+    return float(v.mean()), (float(v) if v.ndim == 0 else v)
+
+
+def _rozyn_stage(
+    y: np.ndarray, fs_hz: float, vehicle: Vehicle, cfg: PipelineConfig, speed_mps: float | None,
+    started: float,
+) -> tuple[Estimate, np.ndarray | None]:
+    """Rozyn's pipeline; also the demeaned window (None when the input is unusable)."""
     n = int(y.shape[0]) if y.ndim >= 1 else 0
     try:
         y, dt = _checked(y, fs_hz, cfg)
+    except InputError as exc:
+        return _failed(str(exc), n, started), None
+    try:
         first, last = _lag_range(cfg, fs_hz, vehicle, speed_mps)
         if cfg.correlation == "free-decay":
             params, modes = _first_or_raise(_identify_and_fit(y[None, None, first:], dt, vehicle, cfg))
-            return _done(started, n, vehicle, params, None, modes)
+            return _done(started, n, vehicle, params, None, modes), y
         jackknife = cfg.variance == "jackknife"
         blocks = cfg.jackknife_blocks if jackknife else 1
         if n < blocks * (last + 1) or n < 4 * (last + 1):
@@ -192,7 +271,7 @@ def estimate(
         decays = np.stack([_decays(r, first, cfg) for r in records])
         params, modes = _first_or_raise(_identify_and_fit(decays[:1], dt, vehicle, cfg))
         if not jackknife:
-            return _done(started, n, vehicle, params, None, modes)
+            return _done(started, n, vehicle, params, None, modes), y
         fits = _identify_and_fit(decays[1:], dt, vehicle, cfg, near=modes)
         replicates = np.array([np.full(3, np.nan) if isinstance(f, Exception) else f[0] for f in fits])
         cov, good = jackknife_covariance(replicates, params)
@@ -201,12 +280,58 @@ def estimate(
                 f"unstable identification: only {good} of {blocks} jackknife replicates found the modes"
             )
         notes = () if good == blocks else (f"{blocks - good} of {blocks} jackknife replicates failed",)
-        return _done(started, n, vehicle, params, cov, modes, notes)
+        return _done(started, n, vehicle, params, cov, modes, notes), y
     except (InputError, IdentificationError, np.linalg.LinAlgError) as exc:
-        return Estimate(
-            status="failed", reason=str(exc), n_samples=n,
-            elapsed_ms=(time.perf_counter() - started) * 1e3,
+        return _failed(str(exc), n, started), y
+
+
+def _failed(reason: str, n: int, started: float, **extra: Any) -> Estimate:
+    return Estimate(status="failed", reason=reason, n_samples=n,
+                    elapsed_ms=(time.perf_counter() - started) * 1e3, **extra)
+
+
+def _refined(
+    rozyn: Estimate, y: np.ndarray, fs_hz: float, vehicle: Vehicle, cfg: PipelineConfig,
+    speed: float | np.ndarray | None, warm_start: Estimate | np.ndarray | None, started: float,
+) -> Estimate:
+    """The likelihood refinement after Rozyn's stage, with its fallbacks."""
+    n = rozyn.n_samples
+    warm = _warm(warm_start)
+    if speed is None:
+        ref = Refinement(status="failed", reason="the speed is unknown (it sets the wheelbase delay)")
+    else:
+        ref = refine(y, fs_hz, vehicle, rozyn.params, speed, cfg.likelihood, warm=warm, start_std=rozyn.std)
+    elapsed = (time.perf_counter() - started) * 1e3
+    if ref.ok:
+        origin = "the previous estimate" if warm is not None else "a coarse grid"
+        notes = () if rozyn.ok else (
+            f"Rozyn stage failed ({rozyn.reason}); the likelihood fit started from {origin}",
         )
+        return Estimate(
+            status="ok", params=ref.params, covariance=ref.covariance, modes=rozyn.modes, a0=rozyn.a0,
+            n_samples=n, elapsed_ms=elapsed, notes=notes + ref.notes, stage="likelihood",
+            rozyn=rozyn, refinement=ref,
+        )
+    if rozyn.ok:
+        return dataclasses.replace(
+            rozyn, elapsed_ms=elapsed, rozyn=rozyn, refinement=ref,
+            notes=(f"likelihood refinement failed ({ref.reason}); publishing the Rozyn estimate",
+                   *rozyn.notes),
+        )
+    return _failed(f"{rozyn.reason}; likelihood refinement failed: {ref.reason}",
+                   n, started, rozyn=rozyn, refinement=ref)
+
+
+def _warm(warm_start: Estimate | np.ndarray | None) -> Refinement | np.ndarray | None:
+    """The previous window's refinement (full θ) or its (m, I, lf), if usable."""
+    if isinstance(warm_start, Estimate):
+        if warm_start.refinement is not None and warm_start.refinement.ok:
+            return warm_start.refinement
+        return warm_start.params if warm_start.ok else None
+    if warm_start is None:
+        return None
+    p = np.asarray(warm_start, dtype=float)
+    return p if p.shape == (3,) and np.all(np.isfinite(p)) else None
 
 
 def _checked(y: np.ndarray, fs_hz: float, cfg: PipelineConfig) -> tuple[np.ndarray, float]:

@@ -21,7 +21,7 @@ from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.pipeline import METHODS, PARAM_NAMES, Estimate, PipelineConfig, estimate
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.road import RoadSpec
-from sim_node.simulation import SimConfig, Simulation
+from sim_node.simulation import SimBlock, SimConfig, Simulation
 
 TRIAL_ROADS = ("iso", "laplace", "free-decay")
 
@@ -39,7 +39,14 @@ class TrialSpec:
     duration_s: float = 100.0
     rate_hz: float = 100.0
     noise_std_mps2: float = 0.0
+    noise_fraction: float = 0.0  # white noise std as a share of each channel's rms
+    bias_mps2: tuple[float, float] = (0.0, 0.0)  # constant sensor offsets (front, rear)
+    speed_variation: float = 0.0  # relative amplitude of a sinusoidal speed change
+    speed_period_s: float = 60.0
+    periodic: bool = True  # road period = the record's distance (thesis eq 4-7); False: endless road
     vehicle: Vehicle = field(default_factory=Vehicle)
+    stiffness_error: float = 0.0  # the estimator is told k_s * (1 + error), both axles
+    damping_error: float = 0.0  # the estimator is told c_s * (1 + error), both axles
     method: str = "rozyn"
     pipeline: PipelineConfig | None = None  # overrides the method's settings
 
@@ -50,6 +57,11 @@ class TrialSpec:
             raise ConfigError(f"method: must be one of {', '.join(METHODS)}, got {self.method!r}")
         if not self.duration_s > 0:
             raise ConfigError(f"duration_s: must be > 0 s, got {self.duration_s!r}")
+        if not self.noise_fraction >= 0:
+            raise ConfigError(f"noise_fraction: must be >= 0, got {self.noise_fraction!r}")
+        for name in ("stiffness_error", "damping_error"):
+            if not -1.0 < getattr(self, name) < 10.0:
+                raise ConfigError(f"{name}: must lie in (-1, 10), got {getattr(self, name)!r}")
         self.sim_config(0)  # validates road and sim settings
 
     def sim_config(self, seed: int) -> SimConfig:
@@ -62,17 +74,35 @@ class TrialSpec:
             )
         return SimConfig(
             vehicle=self.vehicle, road=road, seed=seed, speed_kmh=self.speed_kmh,
-            rate_hz=self.rate_hz, noise_std_mps2=self.noise_std_mps2, duration_s=self.duration_s,
+            speed_variation=self.speed_variation, speed_period_s=self.speed_period_s,
+            rate_hz=self.rate_hz, noise_std_mps2=self.noise_std_mps2, bias_mps2=tuple(self.bias_mps2),
+            duration_s=self.duration_s if self.periodic else 0.0,
         )
 
-    def pipeline_config(self) -> PipelineConfig:
-        cfg = self.pipeline or METHODS[self.method]
+    def pipeline_config(self, method: str | None = None) -> PipelineConfig:
+        """The estimator's settings for ``method`` (default: this spec's method)."""
+        cfg = METHODS[method] if method is not None else (self.pipeline or METHODS[self.method])
         if self.road == "free-decay":
-            # The signal is itself the free decay (thesis section 5-1): no correlation.
+            # The signal is itself the free decay (thesis section 5-1): no correlation, and
+            # nothing for a road-driven likelihood to refine.
             cfg = cfg.replace(
-                correlation="free-decay", variance="none", min_duration_s=min(cfg.min_duration_s, 0.5)
+                correlation="free-decay", variance="none", min_duration_s=min(cfg.min_duration_s, 0.5),
+                refine="none",
             )
         return cfg
+
+    @property
+    def estimator_vehicle(self) -> Vehicle:
+        """The vehicle the estimator is told: the true one with the suspension errors applied."""
+        v, k, c = self.vehicle, 1.0 + self.stiffness_error, 1.0 + self.damping_error
+        if k == 1.0 and c == 1.0:
+            return v
+        return v.replace(
+            suspension_stiffness_front_npm=v.suspension_stiffness_front_npm * k,
+            suspension_stiffness_rear_npm=v.suspension_stiffness_rear_npm * k,
+            suspension_damping_front_nspm=v.suspension_damping_front_nspm * c,
+            suspension_damping_rear_nspm=v.suspension_damping_rear_nspm * c,
+        )
 
     def replace(self, **changes: Any) -> TrialSpec:
         return dataclasses.replace(self, **changes)
@@ -98,17 +128,39 @@ class TrialResult:
         return out
 
 
+def simulate(spec: TrialSpec, seed: int) -> SimBlock:
+    """The seeded run's accelerometer samples, with the spec's relative sensor noise added.
+
+    The relative noise (``noise_fraction``) is white, with a standard deviation of that
+    share of each channel's rms as simulated (about its mean: gravity and bias do not
+    count), from its own random stream.
+    """
+    block = Simulation(spec.sim_config(seed)).run(spec.duration_s)
+    if spec.noise_fraction > 0:
+        accel = block.accel_mps2
+        rms = accel.std(axis=0)
+        noise = np.random.default_rng([seed, 3]).standard_normal(accel.shape) * (spec.noise_fraction * rms)
+        block = dataclasses.replace(block, accel_mps2=accel + noise)
+    return block
+
+
 def run_trial(spec: TrialSpec, seed: int) -> TrialResult:
     """Simulate one seeded run and estimate from it."""
     started = time.perf_counter()
-    sim = Simulation(spec.sim_config(seed))
-    block = sim.run(spec.duration_s)
+    block = simulate(spec, seed)
     sim_ms = (time.perf_counter() - started) * 1e3
-    est = estimate(
-        block.accel_mps2, spec.rate_hz, spec.vehicle, spec.pipeline_config(),
-        speed_mps=float(np.mean(block.speed_mps)),
-    )
+    est = estimate_block(spec, block)
     return TrialResult(seed=seed, estimate=est, truth=spec.truth, sim_ms=sim_ms)
+
+
+def estimate_block(spec: TrialSpec, block: SimBlock, method: str | None = None) -> Estimate:
+    """Run the estimator of ``method`` (default: the spec's) on a simulated block.
+
+    The estimator is told the speed per sample (as from a speed topic) and the spec's
+    estimator vehicle (which may carry suspension errors).
+    """
+    return estimate(block.accel_mps2, spec.rate_hz, spec.estimator_vehicle, spec.pipeline_config(method),
+                    speed_mps=block.speed_mps)
 
 
 def _run_trial_args(args: tuple[TrialSpec, int]) -> TrialResult:
@@ -183,6 +235,7 @@ class Summary:
     within_6pct: np.ndarray  # share of successful trials within 6 % of truth
     mean_reported_std: np.ndarray  # NaN when no covariance was reported
     median_ms: float
+    coverage_95: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))  # truth within ±1.96 std
 
 
 def summarise(results: Iterable[TrialResult]) -> Summary:
@@ -204,4 +257,6 @@ def summarise(results: Iterable[TrialResult]) -> Summary:
         within_6pct=np.mean(np.abs(p / truth - 1.0) <= 0.06, axis=0),
         mean_reported_std=np.sqrt(np.mean(stds**2, axis=0)),
         median_ms=float(np.median([r.estimate.elapsed_ms for r in ok])),
+        coverage_95=np.mean(np.abs(p - truth) <= 1.96 * stds, axis=0) if np.all(np.isfinite(stds)) else
+        np.full(3, np.nan),
     )

@@ -82,7 +82,7 @@ def test_sensors_off_the_axles_are_handled():
 def test_random_road_estimate_with_covariance(vehicle):
     sim = Simulation(SimConfig(duration_s=100.0, seed=2))
     block = sim.run(100.0)
-    est = estimate(block.accel_mps2, 100.0, vehicle, PipelineConfig(), speed_mps=sim.config.speed_mps)
+    est = estimate(block.accel_mps2, 100.0, vehicle, METHODS["rozyn"], speed_mps=sim.config.speed_mps)
     assert est.ok, est.reason
     assert np.all(np.abs(est.params / TRUTH - 1) < 0.06)
     assert est.covariance.shape == (3, 3)

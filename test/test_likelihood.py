@@ -1,0 +1,276 @@
+"""The likelihood refinement: its half-car spectrum, gradient, fit, covariance and statuses."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.likelihood import (
+    HalfCarSpectrum,
+    LikelihoodConfig,
+    WhittleObjective,
+    delay_characteristic,
+    refine,
+    window_spectra,
+)
+from rozyn_estimator.pipeline import METHODS, PipelineConfig, estimate
+from rozyn_estimator.vehicle import Vehicle
+from sim_node.halfcar import state_space
+from sim_node.road import REFERENCE_CPM, RoadSpec, iso_gd_n0_m3
+from sim_node.simulation import SimConfig, Simulation
+
+from conftest import TRUTH
+
+SPEED = 100 / 3.6
+
+
+def run(vehicle=None, seed=3, duration_s=100.0, noise=0.05, rate_hz=100.0, **sim):
+    v = vehicle or Vehicle()
+    cfg = SimConfig(vehicle=v, road=RoadSpec(amplitudes="gaussian"), seed=seed, duration_s=duration_s,
+                    noise_std_mps2=noise, rate_hz=rate_hz, **sim)
+    block = Simulation(cfg).run(duration_s)
+    return block.accel_mps2, block.speed_mps
+
+
+@pytest.fixture(scope="module")
+def window():
+    return run()
+
+
+def road_velocity_psd(speed_mps: float) -> float:
+    """Two-sided PSD of the ISO A road's velocity under a wheel at w = 2 [m^2/s^2/Hz]."""
+    return 2.0 * math.pi**2 * iso_gd_n0_m3("A") * REFERENCE_CPM**2 * speed_mps
+
+
+@pytest.mark.parametrize("offsets", [(0.0, 0.0), (0.4, -0.5)])
+def test_spectrum_matches_the_plant_state_space(offsets):
+    """The condensed frequency-domain model equals the plant's 8-state model exactly."""
+    v = Vehicle(sensor_front_offset_m=offsets[0], sensor_rear_offset_m=offsets[1])
+    f = np.linspace(0.3, 20.0, 300)
+    model = HalfCarSpectrum(v, f, 100.0, SPEED, aliases=0)
+    S, _ = model.spectrum(model.theta(TRUTH, 1.0, np.array([1e-30, 1e-30])), derivatives=False)
+    ss = state_space(v)
+    s = 2j * np.pi * f
+    h = np.einsum("ij,fjk->fik", ss.c, np.linalg.solve(s[:, None, None] * np.eye(8) - ss.a, ss.b)) + ss.d
+    # per unit road velocity at the front wheel, the rear's input delayed by L / v
+    g = (h[:, :, 0] + h[:, :, 1] * np.exp(-s * v.wheelbase_m / SPEED)[:, None]) / s[:, None]
+    expected = g[:, :, None] * g[:, None, :].conj()
+    assert np.allclose(S, expected, rtol=1e-9, atol=1e-12 * np.abs(expected).max())
+
+
+@pytest.mark.parametrize(
+    ("spectra", "waviness", "suspension", "varying", "taper"),
+    [("cross", False, False, False, 0.0), ("cross", True, True, True, 0.2),
+     ("auto", True, False, False, 0.5)],
+)
+def test_gradient_matches_finite_differences(window, spectra, waviness, suspension, varying, taper):
+    accel, _ = window
+    sp = window_spectra(accel, 100.0, (0.5, 15.0), taper)
+    speed = SPEED * (1 + 0.1 * np.sin(np.arange(accel.shape[0]) / 900.0)) if varying else SPEED
+    model = HalfCarSpectrum(Vehicle(), sp.freq_hz, 100.0, speed, estimate_waviness=waviness,
+                            estimate_suspension=suspension, road_shape_terms=3 if waviness else 0,
+                            estimate_incoherence=waviness, window_weights=sp.window_weights)
+    obj = WhittleObjective(model, sp, spectra)
+    theta = model.theta(np.array([1030.0, 1900.0, 1.25]), 2e-3, np.array([3e-5, 5e-5]), waviness=2.2)
+    theta[model.shape_slice] = [0.1, -0.05, 0.02][: model.shape_basis.shape[0]]
+    if suspension:
+        theta[-4:] = [0.05, -0.03, 0.1, -0.1]
+    _, grad = obj.evaluate(theta)
+    step = 1e-6
+    numeric = np.array([(obj.fun(theta + step * e) - obj.fun(theta - step * e)) / (2 * step)
+                        for e in np.eye(theta.size)])
+    assert np.allclose(grad, numeric, rtol=1e-5, atol=1e-6 * np.abs(numeric).max())
+    fisher = obj.hess(theta)
+    assert np.allclose(fisher, fisher.T) and np.linalg.eigvalsh(fisher).min() > 0
+
+
+@pytest.mark.parametrize("taper", [0.0, 0.2])
+def test_model_matches_the_simulated_spectrum_with_aliasing(taper):
+    """Averaged periodograms of noise-free runs at 50 Hz equal the model's absolute level
+    (road intensity from ISO 8608) across the band, aliasing included, tapered or not."""
+    fs = 50.0
+    runs = [run(seed=s, duration_s=60.0, noise=0.0, rate_hz=fs)[0] for s in range(8)]
+    spectra = [window_spectra(a, fs, (0.5, 15.0), taper) for a in runs]
+    assert (spectra[0].window_dft.size == 1) == (taper == 0.0)
+    mean = np.mean([sp.periodogram for sp in spectra], axis=0)
+    f = spectra[0].freq_hz
+    model = HalfCarSpectrum(Vehicle(), f, fs, SPEED, aliases=1, window_weights=spectra[0].window_weights)
+    S, _ = model.spectrum(model.theta(TRUTH, road_velocity_psd(SPEED), np.array([1e-30, 1e-30])),
+                          derivatives=False)
+    bands = np.array_split(np.arange(f.size), 29)  # 0.5 Hz bands, 8 runs x 30 bins each
+    for ch in (0, 1):
+        ratio = np.array([mean[b, ch, ch].real.sum() / S[b, ch, ch].real.sum() for b in bands])
+        assert np.all(np.abs(ratio - 1) < 0.25), ratio
+        assert abs(np.mean(ratio) - 1) < 0.05
+
+
+def test_window_cut_from_an_endless_run():
+    """Not periodic: the taper keeps the front/rear coherence the fit relies on."""
+    cfg = SimConfig(road=RoadSpec(amplitudes="gaussian"), seed=8, noise_std_mps2=0.05)
+    accel = Simulation(cfg).run(150.0).accel_mps2[3000:]
+    ref = refine(accel, 100.0, Vehicle(), np.array([950.0, 2100.0, 1.25]), SPEED)
+    assert ref.ok
+    assert np.all(np.abs(ref.params - TRUTH) < 4 * np.sqrt(np.diag(ref.covariance)))
+
+
+@pytest.mark.parametrize(("spectra", "taper"), [("cross", 0.0), ("auto", 0.0), ("cross", 1.0)])
+def test_score_covariance(window, spectra, taper):
+    """Untapered and cross-spectral: the Fisher information. Auto-spectra: the channels'
+    correlation adds Cov(I_ff, I_rr) = |S_fr|². Hann taper: neighbouring ordinates are
+    correlated, about doubling the variance (Dahlhaus' factor 1.94)."""
+    accel, _ = window
+    sp = window_spectra(accel, 100.0, (0.5, 15.0), taper)
+    model = HalfCarSpectrum(Vehicle(), sp.freq_hz, 100.0, SPEED, window_weights=sp.window_weights)
+    obj = WhittleObjective(model, sp, spectra)
+    theta = model.theta(TRUTH, 2e-3, np.array([3e-5, 5e-5]))
+    combos = np.random.default_rng(1).standard_normal((3, theta.size))
+    J = obj.score_covariance(theta, combos)
+    F = combos @ obj.fisher(theta) @ combos.T
+    if spectra == "auto":
+        S, dS = model.spectrum(theta)
+        u = np.einsum("pkaa->pka", np.tensordot(combos, dS, axes=1)).real / np.einsum("kaa->ka", S).real ** 2
+        assert np.allclose(J, np.einsum("pka,qkb,kab->pq", u, u, np.abs(S) ** 2), rtol=1e-8)
+    elif taper == 0.0:
+        assert np.allclose(J, F, rtol=1e-8)
+    else:
+        assert np.all((np.diag(J) / np.diag(F) > 1.4) & (np.diag(J) / np.diag(F) < 2.1))
+
+
+def test_delay_characteristic():
+    w = np.linspace(1.0, 100.0, 50)
+    assert np.allclose(delay_characteristic(w, 2.8, 10.0), np.exp(-1j * w * 0.28))
+    varying = delay_characteristic(w, 2.8, 10.0 * (1 + 0.1 * np.sin(np.linspace(0, 20, 5000))))
+    assert np.all(np.abs(varying) <= 1 + 1e-12)
+    assert abs(varying[-1]) < 0.9  # the delay spread smears the phase at high frequency
+    assert abs(varying[0] - np.exp(-1j * 0.28)) < 0.01
+
+
+def test_refine_recovers_the_truth_from_a_poor_start(window):
+    accel, speed = window
+    ref = refine(accel, 100.0, Vehicle(), np.array([800.0, 2600.0, 1.5]), speed)
+    assert ref.ok, ref.reason
+    assert np.all(np.abs(ref.params / TRUTH - 1) < 0.01)
+    std = np.sqrt(np.diag(ref.covariance))
+    assert np.all(std / TRUTH < 0.005) and np.all(std > 0)
+    assert np.all(np.abs(ref.params - TRUTH) < 5 * std)
+    assert 0.03 < ref.noise_std_mps2[0] < 0.07 and 0.03 < ref.noise_std_mps2[1] < 0.07  # 0.05 simulated
+    assert abs(ref.waviness - 2.0) < 0.1
+    json.dumps(ref.to_dict())
+
+
+@pytest.mark.parametrize("start", [None, np.array([1000.0, 2000.0, 3.5])])
+def test_without_a_usable_start_a_coarse_grid_starts_the_fit(window, start):
+    accel, speed = window
+    ref = refine(accel, 100.0, Vehicle(), start, speed)
+    assert ref.ok and np.all(np.abs(ref.params / TRUTH - 1) < 0.01)
+
+
+def test_white_noise_is_refused_as_noise():
+    noise = np.random.default_rng(0).standard_normal((10_000, 2))
+    ref = refine(noise, 100.0, Vehicle(), TRUTH, SPEED)
+    assert ref.status == "failed" and "noise" in ref.reason
+
+
+def test_warm_start_converges_faster_to_the_same_optimum(window):
+    accel, speed = window
+    cold = refine(accel, 100.0, Vehicle(), np.array([950.0, 2100.0, 1.25]), speed)
+    warm = refine(accel, 100.0, Vehicle(), np.array([950.0, 2100.0, 1.25]), speed, warm=cold)
+    assert cold.ok and warm.ok
+    assert np.allclose(warm.params, cold.params, rtol=1e-4)
+    assert warm.iterations < cold.iterations
+
+
+def test_auto_spectra_only_are_much_less_precise(window):
+    accel, speed = window
+    cross = refine(accel, 100.0, Vehicle(), np.array([1000.0, 2000.0, 1.2]), speed)
+    auto = refine(accel, 100.0, Vehicle(), np.array([1000.0, 2000.0, 1.2]), speed,
+                  METHODS["likelihood-auto"].likelihood)
+    assert auto.ok, auto.reason
+    assert np.all(np.diag(auto.covariance) > 4 * np.diag(cross.covariance))
+
+
+def test_nuisance_suspension_removes_a_stiffness_error(window):
+    accel, speed = window
+    told = Vehicle(suspension_stiffness_front_npm=49_500.0, suspension_stiffness_rear_npm=88_000.0)  # +10 %
+    start = np.array([1000.0, 2000.0, 1.2])
+    fixed = refine(accel, 100.0, told, start, speed)
+    free = refine(accel, 100.0, told, start, speed, LikelihoodConfig(estimate_suspension=True))
+    assert fixed.ok and free.ok
+    assert fixed.params[0] / 1000 - 1 > 0.03  # a 10 % stiffness error costs several % in mass
+    std = np.sqrt(np.diag(free.covariance))
+    assert np.all(np.abs(free.params - TRUTH) < 4 * std) and abs(free.params[0] / 1000 - 1) < 0.02
+    assert abs(free.suspension_scale[0] - 1 / 1.1) < 0.03 and abs(free.suspension_scale[1] - 1 / 1.1) < 0.03
+
+
+@pytest.mark.parametrize(
+    ("args", "words"),
+    [
+        (dict(speed=-1.0), "positive speed"),
+        (dict(speed=np.full(7, SPEED)), "speed: expected"),
+        (dict(config=LikelihoodConfig(band_hz=(0.5, 0.8))), "too few frequencies"),
+    ],
+)
+def test_refine_failures_are_statuses(window, args, words):
+    accel, _ = window
+    start, speed = args.get("start", TRUTH), args.get("speed", SPEED)
+    ref = refine(accel, 100.0, Vehicle(), start, speed, args.get("config"))
+    assert ref.status == "failed" and words in ref.reason and ref.params is None
+
+
+@pytest.mark.parametrize(("changes", "field"), [({"band_hz": (2.0, 1.0)}, "band_hz"),
+                                                 ({"spectra": "both"}, "spectra"),
+                                                 ({"aliases": -1}, "aliases")])
+def test_invalid_likelihood_config(changes, field):
+    with pytest.raises(ConfigError, match=field):
+        LikelihoodConfig(**changes)
+
+
+def test_pipeline_refines_and_keeps_rozyns_estimate(window):
+    accel, speed = window
+    est = estimate(accel, 100.0, Vehicle(), PipelineConfig(), speed_mps=speed)
+    assert est.ok and est.stage == "likelihood" and not est.notes
+    rozyn = estimate(accel, 100.0, Vehicle(), METHODS["rozyn"], speed_mps=speed)
+    assert np.allclose(est.rozyn.params, rozyn.params) and est.rozyn_stage is est.rozyn
+    assert rozyn.rozyn_stage is rozyn and rozyn.stage == "rozyn"
+    assert np.all(np.abs(est.params / TRUTH - 1) < 0.01)
+    assert len(est.modes) == 2
+    record = json.loads(json.dumps(est.to_dict()))
+    assert record["stage"] == "likelihood" and record["rozyn"]["mass_kg"] == pytest.approx(rozyn.params[0])
+    assert record["refinement"]["status"] == "ok"
+
+
+def test_pipeline_falls_back_to_rozyn_with_a_warning(window):
+    accel, _ = window
+    est = estimate(accel, 100.0, Vehicle(), PipelineConfig())  # no speed: no wheelbase delay
+    assert est.ok and est.stage == "rozyn"
+    assert np.allclose(est.params, est.rozyn.params)
+    assert "publishing the Rozyn estimate" in est.notes[0] and "speed" in est.notes[0]
+
+
+@pytest.mark.parametrize("warm", [True, False])
+def test_the_refinement_stands_in_for_a_failed_rozyn_stage(window, warm):
+    accel, speed = window
+    previous = estimate(accel, 100.0, Vehicle(), PipelineConfig(), speed_mps=speed)
+    # Rozyn's stage finds no body modes in a band where there are none.
+    strict = PipelineConfig(freq_band_hz=(5.0, 6.0))
+    est = estimate(accel, 100.0, Vehicle(), strict, speed_mps=speed, warm_start=previous if warm else None)
+    assert est.ok and est.stage == "likelihood" and est.rozyn.status == "failed"
+    assert "Rozyn stage failed" in est.notes[0]
+    assert ("previous estimate" if warm else "coarse grid") in est.notes[0]
+    assert np.allclose(est.params, previous.params, rtol=1e-4)
+
+
+def test_no_estimate_when_both_stages_fail():
+    noise = np.random.default_rng(1).standard_normal((10_000, 2))
+    est = estimate(noise, 100.0, Vehicle(), PipelineConfig(variance="none"), speed_mps=SPEED)
+    assert est.status == "failed" and est.params is None
+    assert "likelihood refinement failed" in est.reason
+
+
+def test_free_decay_has_nothing_to_refine():
+    with pytest.raises(ConfigError, match="refine"):
+        PipelineConfig(correlation="free-decay")
