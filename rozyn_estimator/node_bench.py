@@ -1,0 +1,256 @@
+"""``rozyn bench --nodes``: the estimator node under load, measured from outside.
+
+The node runs as its own process (the ``estimator_node`` executable), fed over DDS by a
+publisher process; this process watches its ``/diagnostics`` and ``inertia`` and its CPU
+and memory (psutil). Figures:
+
+- ``intake``: for each input rate (front + rear), messages published vs taken in by the
+  node, and its CPU share (% of one core) while only taking messages in;
+- ``cpu_pct``: CPU share at 2 x 100 Hz and 2 x 1 kHz over runs long enough to include
+  updates;
+- ``update_latency_ms``: from the publication of the sample that makes an update due to
+  the arrival of the estimate here (transport, queue, pipeline and publication);
+- ``rss``: the node's resident memory through 10 minutes of sim time at 2 x 100 Hz
+  (the simulator on sim time at 20x).
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+NS = 1_000_000_000
+BIN = Path(sys.executable).parent
+
+
+def _publish(domain: int, rate_hz: float, duration_s: float, start_ns: int, log: Any) -> None:
+    """Publisher process: the simulator's front/rear accelerations (ISO A, 100 km/h) as
+    aligned Imu pairs at ``rate_hz``, paced on the clock."""
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    import rclpy
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import Imu
+
+    rclpy.init(domain_id=domain)
+    node = rclpy.create_node("bench_publisher")
+    qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
+    pubs = [node.create_publisher(Imu, t, qos) for t in ("accel/front", "accel/rear")]
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and not all(p.get_subscription_count() for p in pubs):
+        time.sleep(0.01)
+    from sim_node.simulation import SimConfig, Simulation
+
+    accel = Simulation(SimConfig(rate_hz=rate_hz, duration_s=duration_s)).run(duration_s).accel_mps2.tolist()
+    msg = Imu()
+    n_total = len(accel)
+    step = NS / rate_hz
+    began = time.monotonic()
+    sent = 0
+    publish_times = []
+    while sent < n_total:
+        due = min(n_total, int((time.monotonic() - began) * rate_hz) + 1)
+        while sent < due:
+            stamp = start_ns + round(sent * step)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, NS)
+            for pub, value in zip(pubs, accel[sent], strict=True):
+                msg.linear_acceleration.z = value
+                pub.publish(msg)
+            publish_times.append((stamp, time.monotonic()))
+            sent += 1
+        time.sleep(0.0005)
+    log.put({"sent": 2 * sent, "elapsed_s": time.monotonic() - began, "times": publish_times})
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+class _Watch:
+    """Subscriptions here: the estimator's diagnostics and estimates."""
+
+    def __init__(self, domain: int) -> None:
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import InertiaStamped
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.ctx = Context()
+        rclpy.init(context=self.ctx, domain_id=domain)
+        self.node = rclpy.create_node("bench_watch", context=self.ctx)
+        self.values: dict[str, str] = {}
+        self.inertia: list[tuple[int, float]] = []  # (stamp, arrival wall time)
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 10)
+        self.node.create_subscription(
+            InertiaStamped, "inertia",
+            lambda m: self.inertia.append((m.header.stamp.sec * NS + m.header.stamp.nanosec,
+                                           time.monotonic())),
+            10,
+        )
+        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.executor.add_node(self.node)
+
+    def _on_diag(self, msg: Any) -> None:
+        for s in msg.status:
+            if s.name.endswith("estimator_node"):
+                self.values = {kv.key: kv.value for kv in s.values}
+
+    def spin(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.02)
+
+    def taken(self) -> int:
+        v = self.values
+        return int(v.get("samples_front", 0)) + int(v.get("samples_rear", 0)) + int(v.get("dropped_total", 0))
+
+    def close(self) -> None:
+        self.node.destroy_node()
+        self.executor.shutdown()
+        self.ctx.try_shutdown()
+
+
+def _start_estimator(domain: int, *params: str) -> subprocess.Popen:
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    args = [str(BIN / "estimator_node"), "--ros-args", "-p", "diagnostics_period_s:=0.2"]
+    for p in params:
+        args += ["-p", p]
+    return subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+
+
+def _stop(proc: subprocess.Popen) -> None:
+    if proc.poll() is not None:
+        return
+    os.killpg(proc.pid, signal.SIGINT)
+    try:
+        proc.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+
+
+def _feed(domain: int, watch: _Watch, rate_hz: float, duration_s: float, start_ns: int) -> dict[str, Any]:
+    """Publish for ``duration_s``; return published/taken counts and the publish log."""
+    ctx = mp.get_context("spawn")
+    log = ctx.Queue()
+    before = watch.taken()
+    proc = ctx.Process(target=_publish, args=(domain, rate_hz, duration_s, start_ns, log))
+    proc.start()
+    result = None
+    while result is None:
+        watch.spin(0.1)
+        try:
+            result = log.get_nowait()
+        except Exception:  # queue.Empty; keep spinning
+            if not proc.is_alive():
+                raise RuntimeError("the bench publisher died") from None
+    proc.join()
+    watch.spin(1.0)  # let the last diagnostics arrive
+    result["taken"] = watch.taken() - before
+    return result
+
+
+def _cpu_pct(pid: int, seconds_fn: Any) -> float:
+    import psutil
+
+    p = psutil.Process(pid)
+    t0 = sum(p.cpu_times()[:2])
+    w0 = time.monotonic()
+    seconds_fn()
+    return 100.0 * (sum(p.cpu_times()[:2]) - t0) / (time.monotonic() - w0)
+
+
+def bench_intake(domain: int, rates_hz: tuple[float, ...] = (100, 500, 1000, 2000, 4000, 8000),
+                 step_s: float = 5.0) -> list[dict[str, Any]]:
+    """Messages taken in vs published at rising rates (window never full: intake only)."""
+    est = _start_estimator(domain, "window_s:=3600.0", "update_period_s:=3600.0")
+    watch = _Watch(domain)
+    rows = []
+    try:
+        watch.spin(2.0)
+        start = 1000 * NS
+        for rate in rates_hz:
+            out: dict[str, Any] = {}
+
+            def feed(rate: float = rate, start: int = start, out: dict[str, Any] = out) -> None:
+                out.update(_feed(domain, watch, rate, step_s, start))
+
+            cpu = _cpu_pct(est.pid, feed)
+            start += round((step_s + 2) * NS)
+            rows.append({"rate_hz_per_sensor": rate, "published": out["sent"], "taken": out["taken"],
+                         "lost": out["sent"] - out["taken"], "cpu_pct": round(cpu, 1),
+                         "publisher_kept_up": out["elapsed_s"] < step_s * 1.2})
+    finally:
+        watch.close()
+        _stop(est)
+    return rows
+
+
+def bench_cpu_and_latency(domain: int, rate_hz: float, duration_s: float) -> dict[str, Any]:
+    """CPU share with updates running, and update-to-publish latency."""
+    est = _start_estimator(domain, "window_s:=20.0", "update_period_s:=2.0", "min_window_fill:=0.5")
+    watch = _Watch(domain)
+    try:
+        watch.spin(2.0)
+        out: dict[str, Any] = {}
+        cpu = _cpu_pct(est.pid, lambda: out.update(_feed(domain, watch, rate_hz, duration_s, 2000 * NS)))
+        watch.spin(2.0)
+        published = dict(out["times"])
+        lat = [(arrival - published[stamp]) * 1e3 for stamp, arrival in watch.inertia if stamp in published]
+    finally:
+        watch.close()
+        _stop(est)
+    return {"rate_hz_per_sensor": rate_hz, "cpu_pct": round(cpu, 1), "estimates": len(watch.inertia),
+            "update_latency_ms_median": round(statistics.median(lat), 1) if lat else None,
+            "update_latency_ms_max": round(max(lat), 1) if lat else None, "taken": out["taken"],
+            "published": out["sent"]}
+
+
+def bench_rss(domain: int, sim_s: float = 600.0, rtf: float = 20.0) -> dict[str, Any]:
+    """The estimator's RSS through ``sim_s`` of sim time from the simulator node."""
+    import psutil
+
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    est = _start_estimator(domain, "use_sim_time:=true", "speed_topic:=sim/speed")
+    sim = subprocess.Popen(
+        [str(BIN / "sim_node"), "--ros-args", "-p", "time_mode:=sim", "-p", f"real_time_factor:={rtf}",
+         "-p", f"duration_s:={sim_s}", "-p", "wait_for_subscribers:=true"],
+        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    proc = psutil.Process(est.pid)
+    samples = []
+    try:
+        began = time.monotonic()
+        while sim.poll() is None and time.monotonic() - began < sim_s / rtf * 3 + 30:
+            samples.append((time.monotonic() - began, proc.memory_info().rss / 2**20))
+            time.sleep(1.0)
+    finally:
+        _stop(sim)
+        _stop(est)
+    rss = [r for _, r in samples]
+    half = len(rss) // 2
+    return {"sim_time_s": sim_s, "wall_s": round(samples[-1][0], 1), "rss_mb_first": round(rss[0], 1),
+            "rss_mb_after_first_window": round(rss[min(len(rss) - 1, 8)], 1),
+            "rss_mb_last": round(rss[-1], 1), "rss_mb_max": round(max(rss), 1),
+            "rss_mb_second_half_growth": round(rss[-1] - rss[half], 1)}
+
+
+def run_node_bench(quick: bool = False) -> dict[str, Any]:
+    domain = 231 - os.getpid() % 10
+    rates = (100, 1000, 4000) if quick else (100, 500, 1000, 2000, 4000, 8000)
+    intake = bench_intake(domain, rates, step_s=3.0 if quick else 5.0)
+    sustained = max((r["rate_hz_per_sensor"] for r in intake if r["lost"] == 0 and r["publisher_kept_up"]),
+                    default=0)
+    out = {
+        "intake": intake,
+        "max_sustained_rate_hz_per_sensor": sustained,
+        "at_2x100hz": bench_cpu_and_latency(domain, 100.0, 20.0 if quick else 60.0),
+        "at_2x1khz": bench_cpu_and_latency(domain, 1000.0, 20.0 if quick else 60.0),
+        "rss": bench_rss(domain, sim_s=120.0 if quick else 600.0),
+        "goals": {"rate_hz_per_sensor": 1000, "cpu_pct_at_2x1khz": 25.0, "update_latency_ms": 20.0},
+    }
+    return out

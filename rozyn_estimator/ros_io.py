@@ -1,0 +1,108 @@
+"""ROS message conversions shared by the nodes and the replay (no node, no DDS needed).
+
+Conventions (documented in the README):
+- ``inertia`` (geometry_msgs/InertiaStamped): ``m`` the sprung mass [kg], ``iyy`` the
+  pitch moment of inertia [kg m^2]; ``com.x`` the centre of gravity along the body's x
+  axis (REP 103: forward) in ``header.frame_id``, i.e. ``front_axle_x_m - lf`` (the CoG
+  lies ``lf`` behind the front axle). A half car is symmetric about its centre plane, so
+  ``com.y = ixy = iyz = 0``; what the half car cannot see is NaN: ``com.z``, ``ixx``,
+  ``izz``, ``ixz``.
+- ``inertia/covariance`` (std_msgs/Float64MultiArray): the 3x3 covariance, row-major, of
+  (mass [kg], pitch inertia [kg m^2], CoG from the front axle [m]); ``layout.dim[0]`` is
+  labelled ``"mass_kg,pitch_inertia_kgm2,cog_from_front_axle_m"`` and
+  ``layout.dim[1].label`` carries the stamp of the matching ``inertia`` message as
+  ``"stamp=<sec>.<nanosec>"``. It is published right after that message.
+"""
+
+from __future__ import annotations
+
+import math
+from operator import attrgetter
+from typing import Any
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import InertiaStamped
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.online import NS, Health, Update
+from rozyn_estimator.pipeline import PARAM_NAMES
+
+COVARIANCE_LABEL = ",".join(PARAM_NAMES)
+
+
+def stamp_ns(stamp: Any) -> int:
+    """builtin_interfaces/Time -> integer nanoseconds."""
+    return stamp.sec * NS + stamp.nanosec
+
+
+def to_time(ns: int) -> Time:
+    return Time(sec=int(ns // NS), nanosec=int(ns % NS))
+
+
+def field_getter(path: str, msg_type: Any = None) -> attrgetter:
+    """Getter for a dotted numeric field of a message, e.g. ``linear_acceleration.z``.
+
+    With ``msg_type`` the field is checked to exist and be numeric in that type.
+    """
+    if not path or any(not part.isidentifier() for part in path.split(".")):
+        raise ConfigError(f"field: expected a dotted field name like linear_acceleration.z, got {path!r}")
+    getter = attrgetter(path)
+    if msg_type is not None:
+        try:
+            value = getter(msg_type())
+        except AttributeError:
+            raise ConfigError(f"field: {msg_type.__name__} has no field {path!r}") from None
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"field: {msg_type.__name__}.{path} is not a number ({type(value).__name__})")
+    return getter
+
+
+def inertia_msg(update: Update, frame_id: str, front_axle_x_m: float) -> InertiaStamped:
+    """The published estimate (see the module docstring for the conventions)."""
+    m, iyy, lf = (float(x) for x in update.estimate.params)
+    msg = InertiaStamped()
+    msg.header.stamp = to_time(update.stamp_ns)
+    msg.header.frame_id = frame_id
+    inertia = msg.inertia
+    inertia.m = m
+    inertia.iyy = iyy
+    inertia.com.x = front_axle_x_m - lf
+    inertia.com.y = 0.0
+    inertia.com.z = math.nan
+    inertia.ixx = inertia.izz = inertia.ixz = math.nan
+    inertia.ixy = inertia.iyz = 0.0
+    return msg
+
+
+def covariance_msg(update: Update) -> Float64MultiArray:
+    """3x3 covariance with its labelled layout and the matching stamp."""
+    msg = Float64MultiArray()
+    t = to_time(update.stamp_ns)
+    msg.layout.dim = [
+        MultiArrayDimension(label=COVARIANCE_LABEL, size=3, stride=9),
+        MultiArrayDimension(label=f"stamp={t.sec}.{t.nanosec:09d}", size=3, stride=3),
+    ]
+    msg.data = [float(x) for x in update.estimate.covariance.ravel()]
+    return msg
+
+
+def covariance_stamp_ns(msg: Float64MultiArray) -> int:
+    """The stamp carried by a covariance message (to match it with its inertia message)."""
+    sec, _, nanosec = msg.layout.dim[1].label.removeprefix("stamp=").partition(".")
+    return int(sec) * NS + int(nanosec)
+
+
+def diagnostic_array(health: Health, name: str, hardware_id: str, stamp: int) -> DiagnosticArray:
+    """One DiagnosticStatus wrapped in a DiagnosticArray."""
+    status = DiagnosticStatus(
+        level=bytes([health.level]),
+        name=name,
+        message=health.message,
+        hardware_id=hardware_id,
+        values=[KeyValue(key=k, value=v) for k, v in health.values.items()],
+    )
+    array = DiagnosticArray(status=[status])
+    array.header.stamp = to_time(stamp)
+    return array

@@ -1,0 +1,295 @@
+"""Node integration tests, launch-free: in one process and across processes.
+
+Each test session uses its own ROS_DOMAIN_ID and localhost-only discovery.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+DOMAIN = 100 + os.getpid() % 100
+os.environ["ROS_DOMAIN_ID"] = str(DOMAIN)
+
+import rclpy  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import InertiaStamped  # noqa: E402
+from rclpy.context import Context  # noqa: E402
+from rclpy.experimental import EventsExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
+from sensor_msgs.msg import Imu  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+
+from rozyn_estimator import ros_io  # noqa: E402
+from rozyn_estimator.errors import ConfigError  # noqa: E402
+from rozyn_estimator.node import EstimatorNode  # noqa: E402
+from rozyn_estimator.vehicle import Vehicle  # noqa: E402
+from sim_node.node import SimNode  # noqa: E402
+from sim_node.simulation import SimConfig, Simulation  # noqa: E402
+
+pytestmark = pytest.mark.ros
+ROOT = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+NS = 1_000_000_000
+
+
+@pytest.fixture
+def ros():
+    """A private context, an EventsExecutor and a probe node; torn down after the test."""
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=DOMAIN)
+    executor = EventsExecutor(context=ctx)
+    probe = rclpy.create_node("probe", context=ctx)
+    executor.add_node(probe)
+    made = [probe]
+
+    class Ros:
+        context = ctx
+
+        def add(self, node):
+            made.append(node)
+            executor.add_node(node)
+            return node
+
+        def spin_until(self, condition, timeout_s):
+            deadline = time.monotonic() + timeout_s
+            while time.monotonic() < deadline and not condition():
+                executor.spin_once(timeout_sec=0.05)
+            return condition()
+
+    r = Ros()
+    r.probe = probe
+    yield r
+    for node in made:
+        node.destroy_node()
+    executor.shutdown()
+    rclpy.shutdown(context=ctx)
+
+
+def collect(probe):
+    got = {"inertia": [], "covariance": [], "diagnostics": []}
+    probe.create_subscription(InertiaStamped, "inertia", got["inertia"].append, 10)
+    probe.create_subscription(Float64MultiArray, "inertia/covariance", got["covariance"].append, 10)
+    probe.create_subscription(DiagnosticArray, "/diagnostics", got["diagnostics"].append, 50)
+    return got
+
+
+def estimator_status(got):
+    return [s for a in got["diagnostics"] for s in a.status if s.name.endswith("estimator_node")]
+
+
+def test_sim_and_estimator_in_one_process(ros):
+    """ISO A, fixed amplitudes, 100 km/h, sim time at 20x: after 150 s within 5 %."""
+    got = collect(ros.probe)
+    started = time.monotonic()
+    sim = ros.add(SimNode(context=ros.context, parameter_overrides=[
+        Parameter("time_mode", value="sim"), Parameter("real_time_factor", value=20.0),
+        Parameter("duration_s", value=150.0), Parameter("wait_for_subscribers", value=True)]))
+    ros.add(EstimatorNode(context=ros.context, parameter_overrides=[
+        Parameter("use_sim_time", value=True), Parameter("speed_topic", value="sim/speed")]))
+    assert ros.spin_until(lambda: sim.finished, 50.0)
+    def covariance_of_145():
+        return got["covariance"] and ros_io.covariance_stamp_ns(got["covariance"][-1]) >= 145 * NS
+
+    ros.spin_until(covariance_of_145, 10.0)
+    elapsed = time.monotonic() - started
+    last = got["inertia"][-1]
+    assert last.header.stamp.sec == 145 and last.header.frame_id == "base_link"
+    estimate = np.array([last.inertia.m, last.inertia.iyy, -last.inertia.com.x])
+    assert np.all(np.abs(estimate / [1000.0, 2000.0, 1.2] - 1) < 0.05), estimate
+    assert math.isnan(last.inertia.ixx) and last.inertia.ixy == 0.0
+    cov = got["covariance"][-1]
+    assert ros_io.covariance_stamp_ns(cov) == ros_io.stamp_ns(last.header.stamp)
+    assert cov.layout.dim[0].label == "mass_kg,pitch_inertia_kgm2,cog_from_front_axle_m"
+    c = np.array(cov.data).reshape(3, 3)
+    assert np.allclose(c, c.T) and np.all(np.diag(c) > 0)
+    def last_status():
+        found = [s for s in estimator_status(got)
+                 if any(kv.key == "update_stamp" and kv.value == "145.000000000" for kv in s.values)]
+        return found[-1] if found else None
+
+    assert ros.spin_until(last_status, 5.0)
+    status = last_status()
+    values = {kv.key: kv.value for kv in status.values}
+    assert status.level in (b"\x00", b"\x01") and values["dropped_total"] == "0", (status.message, values)
+    assert float(values["mass_kg"]) == pytest.approx(last.inertia.m, rel=1e-5)
+    assert {"mode1_freq_hz", "mode2_damping", "window_fill_pct", "pipeline_ms", "speed_mps"} <= set(values)
+    assert elapsed < 60.0
+
+
+def test_console_scripts_across_processes():
+    """Both executables as subprocesses; a probe here receives estimates; SIGINT stops both."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN + 1), PYTHONUNBUFFERED="1")
+    sim = subprocess.Popen(
+        [str(BIN / "sim_node"), "--ros-args", "--params-file", str(ROOT / "config" / "sim.yaml"),
+         "-p", "real_time_factor:=25.0"],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    est = subprocess.Popen(
+        [str(BIN / "estimator_node"), "--ros-args", "--params-file", str(ROOT / "config" / "estimator.yaml"),
+         "--params-file", str(ROOT / "config" / "vehicle.yaml"), "-p", "use_sim_time:=true",
+         "-p", "window_s:=40.0", "-p", "speed_mps:=27.78"],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=DOMAIN + 1)
+    probe = rclpy.create_node("probe", context=ctx)
+    got = []
+    probe.create_subscription(InertiaStamped, "inertia", got.append, 10)
+    executor = EventsExecutor(context=ctx)
+    executor.add_node(probe)
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and len(got) < 2:
+            executor.spin_once(timeout_sec=0.1)
+            assert sim.poll() is None and est.poll() is None, "a node died"
+    finally:
+        for proc in (sim, est):
+            os.killpg(proc.pid, signal.SIGINT)
+        outputs = [proc.communicate(timeout=20) for proc in (sim, est)]
+        probe.destroy_node()
+        executor.shutdown()
+        rclpy.shutdown(context=ctx)
+    assert len(got) >= 2
+    assert 800 < got[-1].inertia.m < 1200
+    for proc, (out, err) in zip((sim, est), outputs, strict=True):
+        assert proc.returncode == 0, err
+        assert "Traceback" not in err + out
+
+
+def _imu(stamp_ns: int, value: float) -> Imu:
+    msg = Imu()
+    msg.header.stamp = ros_io.to_time(stamp_ns)
+    msg.linear_acceleration.z = value
+    return msg
+
+
+def test_bad_input_streams(ros):
+    """Faulty streams at the estimator: drops counted, resets reported, waiting for a
+    silent sensor reported, and no estimate ever published from garbage."""
+    got = collect(ros.probe)
+    est = ros.add(EstimatorNode(context=ros.context, parameter_overrides=[
+        Parameter("window_s", value=20.0), Parameter("update_period_s", value=2.0),
+        Parameter("diagnostics_period_s", value=0.1), Parameter("silence_s", value=1.0)]))
+    qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    front = ros.probe.create_publisher(Imu, "accel/front", qos)
+    rear = ros.probe.create_publisher(Imu, "accel/rear", qos)
+    ros.spin_until(lambda: front.get_subscription_count() and rear.get_subscription_count(), 10.0)
+
+    sent = [0]
+
+    def processed():  # samples the estimator has taken in (kept or dropped)
+        channels = est.online._channels
+        return channels[0].count + channels[1].count + sum(est.online.dropped.values())
+
+    def send(samples):
+        for i, (channel, stamp, value) in enumerate(samples):
+            (front, rear)[channel].publish(_imu(stamp, value))
+            sent[0] += 1
+            if i % 20 == 19:  # pace: let the estimator keep up with its queue
+                ros.spin_until(lambda: processed() >= sent[0] - 20, 2.0)
+        ros.spin_until(lambda: processed() >= sent[0], 5.0)
+
+    t0 = 5000 * NS
+    step = 10_000_000
+    # 1. garbage: NaN on the front, a constant on the rear -> no estimate, ever
+    send([(c, t0 + k * step, math.nan if c == 0 else 9.81) for k in range(3000) for c in (0, 1)])
+    assert est.online.dropped["front: non-finite value"] == 3000
+    # 2. good data with faults: duplicates, out of order, a gap, time jumping back
+    accel = Simulation(SimConfig(duration_s=30.0)).run(30.0).accel_mps2
+    t1 = t0 + 40 * NS
+    stream = []
+    for k, (a, b) in enumerate(accel.tolist()):
+        t = t1 + k * step + (3 * NS if k >= 1500 else 0)  # a 3 s gap at 15 s
+        stream += [(0, t, a), (1, t, b)]
+        if k == 100:
+            stream += [(0, t, a), (1, t - 5 * step, b)]  # duplicate, out of order
+    stream += [(0, t0 + 10 * NS, 9.8), (1, t0 + 10 * NS, 9.8)]  # back in time: reset
+    send(stream)
+    online = est.online
+    assert online.dropped["front: duplicate stamp"] == 1
+    assert online.dropped["rear: out-of-order stamp"] == 1
+    assert online.resets >= 2
+    # 3. the rear falls silent: waiting for it
+    send([(0, t0 + 10 * NS + k * step, 9.8) for k in range(1, 300)])
+    ros.spin_until(lambda: any("waiting for accel/rear" in s.message for s in estimator_status(got)), 5.0)
+    messages = [s.message for s in estimator_status(got)]
+    assert any("waiting for accel/rear" in m for m in messages)
+    assert any("window reset" in m for m in messages) or online.resets >= 2
+    levels = {s.level for s in estimator_status(got)}
+    assert b"\x01" in levels
+    # nothing bogus: no inertia from the garbage, and any estimate is a physical number
+    for msg in got["inertia"]:
+        assert msg.header.stamp.sec >= t1 // NS
+        assert math.isfinite(msg.inertia.m) and msg.inertia.m > 0
+
+
+def test_invalid_parameters_are_refused_at_startup(ros):
+    with pytest.raises(ConfigError, match="update_period_s"):
+        EstimatorNode(context=ros.context, parameter_overrides=[Parameter("update_period_s", value=500.0)])
+    with pytest.raises(ConfigError, match="freq_band_hz"):
+        EstimatorNode(context=ros.context, parameter_overrides=[
+            Parameter("pipeline.freq_band_hz", value=[3.0, 1.0])])
+    with pytest.raises(ConfigError, match=r"road\.kind"):
+        SimNode(context=ros.context, parameter_overrides=[Parameter("road.kind", value="gravel")])
+    with pytest.raises(ConfigError, match="cog_from_front_axle_m"):
+        SimNode(context=ros.context, parameter_overrides=[
+            Parameter("vehicle.cog_from_front_axle_m", value=5.0)])
+
+
+@pytest.mark.parametrize(
+    ("exe", "arg", "words"),
+    [("estimator_node", "window_s:=-5.0", "window_s"), ("estimator_node", "window_s:=abc", "window_s"),
+     ("estimator_node", "field:=linear_acceleration.w", "no field"),
+     ("estimator_node", "field:=header.frame_id", "not a number"),
+     ("estimator_node", "update_period_s:=500.0", "update_period_s"),
+     ("sim_node", "road.kind:=gravel", "road.kind")],
+)
+def test_invalid_parameters_exit_with_a_message(exe, arg, words):
+    env = dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN + 2))
+    done = subprocess.run([str(BIN / exe), "--ros-args", "-p", arg], env=env, capture_output=True,
+                          text=True, timeout=30)
+    assert done.returncode == 2
+    assert words in done.stderr and "Traceback" not in done.stderr
+    assert done.stderr.strip().count("\n") == 0
+
+
+def test_runtime_parameter_changes_are_validated(ros):
+    est = ros.add(EstimatorNode(context=ros.context))
+    result = est.set_parameters([Parameter("window_s", value=2.0)])[0]
+    assert not result.successful and "update_period_s" in result.reason
+    assert est.get_parameter("window_s").value == 120.0
+    result = est.set_parameters([Parameter("pipeline.damping_band", value=[0.5, 0.1])])[0]
+    assert not result.successful and "damping_band" in result.reason
+    result = est.set_parameters([Parameter("window_s", value=60)])[0]  # an integer is fine
+    assert result.successful and est.online.config.window_s == 60.0
+    result = est.set_parameters([Parameter("vehicle.wheelbase_m", value=0.5)])[0]
+    assert not result.successful and "cog_from_front_axle_m" in result.reason
+    assert est.online.vehicle == Vehicle()
+
+
+def test_parameter_files_configure_both_nodes():
+    files = ["--params-file", str(ROOT / "config" / "estimator.yaml"),
+             "--params-file", str(ROOT / "config" / "sim.yaml"),
+             "--params-file", str(ROOT / "config" / "vehicle.yaml")]
+    ctx = Context()
+    rclpy.init(args=["--ros-args", *files], context=ctx, domain_id=DOMAIN + 3)
+    try:
+        est = EstimatorNode(context=ctx)
+        sim = SimNode(context=ctx)
+        assert est.online.config.window_s == 120.0 and est.online.pipeline.gamma == 4
+        assert est.online.vehicle == Vehicle() == sim.config.vehicle
+        assert sim.get_parameter("time_mode").value == "sim"
+        assert sim.get_parameter("wait_for_subscribers").value is True
+        est.destroy_node()
+        sim.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)

@@ -1,0 +1,224 @@
+"""The online class: window, pairing, drops, resets and the stamp-driven schedule."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.online import NS, OK, WARN, OnlineConfig, OnlineEstimator, pair_channels
+from rozyn_estimator.pipeline import PipelineConfig
+from rozyn_estimator.vehicle import Vehicle
+from sim_node.simulation import SimConfig, Simulation
+
+from conftest import TRUTH
+
+# The schedule is under test: the Rozyn stage alone, without covariance, is enough.
+FAST = PipelineConfig(variance="none", refine="none")
+
+
+@pytest.fixture(scope="module")
+def run():
+    """200 s of the Table 5-1 car on ISO A, 100 km/h, stamps from t = 1000 s."""
+    block = Simulation(SimConfig(duration_s=200.0, seed=3)).run(200.0)
+    stamps = 1000 * NS + np.round(block.t_s * NS).astype(np.int64)
+    return stamps, block.accel_mps2
+
+
+def online(**changes) -> OnlineEstimator:
+    cfg = OnlineConfig(window_s=60.0, update_period_s=5.0, speed_mps=100 / 3.6).replace(**changes)
+    return OnlineEstimator(Vehicle(), cfg, FAST)
+
+
+def feed(est: OnlineEstimator, stamps, accel, order="interleaved"):
+    updates = []
+    if order == "interleaved":
+        for t, (a, b) in zip(stamps.tolist(), accel.tolist(), strict=True):
+            est.add(0, t, a)
+            est.add(1, t, b)
+            updates += est.process()
+    else:
+        n = len(stamps)
+        channels = np.repeat([0, 1], n) if order == "blocks" else np.tile([1, 0], n)
+        ts = np.concatenate([stamps, stamps]) if order == "blocks" else np.repeat(stamps, 2)
+        vs = np.concatenate([accel[:, 0], accel[:, 1]]) if order == "blocks" else accel[:, ::-1].ravel()
+        est.add_batch(channels, ts, vs)
+        updates += est.process()
+    return updates
+
+
+def test_schedule_window_and_estimates(run):
+    stamps, accel = run
+    est = online()
+    updates = feed(est, stamps, accel)
+    due = [u.stamp_ns for u in updates]
+    assert np.all(np.diff(due) == 5 * NS) and due[0] == stamps[0] + 5 * NS
+    warming = [u for u in updates if u.window_fill < 0.8]
+    assert all(u.estimate is None and u.level == OK and "full" in u.message for u in warming)
+    done = [u for u in updates if u.window_fill >= 0.8]
+    assert len(done) >= 20 and all(u.published for u in done)
+    last = done[-1]
+    assert last.fs_hz == pytest.approx(100.0)
+    assert last.estimate.n_samples == 6000  # 60 s at 100 Hz
+    assert np.all(np.abs(last.estimate.params / TRUTH - 1) < 0.15)  # Rozyn stage, 60 s
+    assert est.health().level == OK and est.health().values["mass_kg"]
+
+
+def test_batches_and_arrival_order_do_not_change_the_updates(run):
+    stamps, accel = run
+    n = 8000
+    ref = [(u.stamp_ns, None if u.estimate is None else tuple(u.estimate.params))
+           for u in feed(online(), stamps[:n], accel[:n])]
+    for order in ("blocks", "swapped"):
+        got = [(u.stamp_ns, None if u.estimate is None else tuple(u.estimate.params))
+               for u in feed(online(), stamps[:n], accel[:n], order)]
+        assert got == ref, order
+
+
+def test_non_finite_duplicate_and_out_of_order_samples_are_dropped(run):
+    stamps, accel = run
+    est = online()
+    bad = accel[:3000].copy()
+    bad[100, 0] = np.nan
+    bad[200, 1] = np.inf
+    for t, (a, b) in zip(stamps[:3000].tolist(), bad.tolist(), strict=True):
+        est.add(0, t, a)
+        est.add(1, t, b)
+        if t == stamps[500]:
+            est.add(0, t, a)  # duplicate
+            est.add(1, t - 3 * NS // 100, b)  # 30 ms back: out of order
+    assert est.dropped["front: non-finite value"] == 1
+    assert est.dropped["rear: non-finite value"] == 1
+    assert est.dropped["front: duplicate stamp"] == 1
+    assert est.dropped["rear: out-of-order stamp"] == 1
+    assert est.resets == 0
+    h = est.health()
+    assert h.level == WARN and "lost 4 samples" in h.message
+    assert h.values["dropped_total"] == "4" and h.values["dropped (rear: out-of-order stamp)"] == "1"
+    assert est.health().level == OK  # reported once
+
+
+def test_samples_lost_on_the_way_are_counted(run):
+    stamps, accel = run
+    keep = np.ones(len(stamps), bool)
+    keep[[300, 301, 302, 900]] = False  # 4 front samples never arrive
+    one, batch = online(), online()
+    for t, a, b, k in zip(stamps[:2000].tolist(), accel[:2000, 0], accel[:2000, 1], keep, strict=False):
+        if k:
+            one.add(0, t, a)
+        one.add(1, t, b)
+    k = keep[:2000]
+    batch.add_batch(np.zeros(k.sum(), int), stamps[:2000][k], accel[:2000, 0][k])
+    batch.add_batch(np.ones(2000, int), stamps[:2000], accel[:2000, 1])
+    for est in (one, batch):
+        h = est.health()
+        assert (h.values["missing_front"], h.values["missing_rear"]) == ("4", "0")
+        assert h.level == WARN and "lost 4 samples" in h.message
+
+
+def test_batch_with_anomalies_equals_one_by_one(run):
+    stamps, accel = run
+    t = np.repeat(stamps[:2000], 2)
+    c = np.tile([0, 1], 2000)
+    v = accel[:2000].ravel().copy()
+    v[10] = np.nan
+    t[501] = t[499]  # rear duplicate
+    t[2000:] += 3 * NS  # a gap on both: reset
+    one, batch = online(), online()
+    for ci, ti, vi in zip(c.tolist(), t.tolist(), v.tolist(), strict=True):
+        one.add(ci, ti, vi)
+    batch.add_batch(c, t, v)
+    assert one.dropped == batch.dropped and one.resets == batch.resets == 1
+    assert [u.stamp_ns for u in one.process()] == [u.stamp_ns for u in batch.process()]
+
+
+def test_gap_and_time_jumping_back_reset_the_window(run):
+    stamps, accel = run
+    est = online()
+    feed(est, stamps[:3000], accel[:3000])
+    feed(est, stamps[3000:6000] + 2 * NS, accel[3000:6000])  # a 2 s gap
+    assert est.resets == 1
+    assert any("gap of 2.010 s" in msg for _, msg in est.events)
+    feed(est, stamps[:3000], accel[:3000])  # bag loop: back to the start
+    assert est.resets == 2
+    assert any("time jumped back" in msg for _, msg in est.events)
+    h = est.health()
+    assert h.values["window_resets"] == "2"
+    assert h.values["samples_front"] == "9000"  # counted across resets
+
+
+def test_one_silent_sensor_gives_no_estimate_and_a_warning(run):
+    stamps, accel = run
+    est = online()
+    for t, a in zip(stamps[:8000].tolist(), accel[:8000, 0].tolist(), strict=True):
+        est.add(0, t, a)
+    assert est.process() == []
+    h = est.health()
+    assert h.level == WARN and "waiting for rear" in h.message
+    est.add(1, int(stamps[7000]), 9.8)  # the rear speaks once, then lags by 10 s
+    h = est.health()
+    assert h.level == WARN and "rear: 10.0 s behind" in h.message
+    h = est.health(silent_s=(0.1, 4.0))
+    assert h.level == WARN and h.message == "waiting for rear: no message for 4.0 s"
+
+
+def test_rate_mismatch_and_offsets_are_resampled(run):
+    stamps, accel = run
+    est = online()
+    fine = Simulation(SimConfig(duration_s=200.0, seed=3, rate_hz=400.0)).run(200.0)
+    fine_t = 1000 * NS + np.round(fine.t_s * NS).astype(np.int64) + 1_300_000  # 1.3 ms late
+    est.add_batch(np.zeros(len(stamps), int), stamps, accel[:, 0])
+    est.add_batch(np.ones(len(fine_t), int), fine_t, fine.accel_mps2[:, 1])
+    updates = [u for u in est.process() if u.published]
+    assert updates and updates[-1].fs_hz == pytest.approx(100.0)
+    aligned = [u for u in feed(online(), stamps, accel) if u.published]
+    assert [u.stamp_ns for u in updates] == [u.stamp_ns for u in aligned]
+    # the same car seen through a 400 Hz sensor 1.3 ms late: the same estimate within 2 %
+    assert np.allclose(updates[-1].estimate.params, aligned[-1].estimate.params, rtol=0.02)
+
+
+def test_pairing_of_aligned_and_offset_channels():
+    t = np.arange(0, 1000) * 10_000_000
+    v = np.sin(t / NS)
+    cfg = OnlineConfig()
+    grid, y, fs = pair_channels((t, v), (t, 2 * v), cfg)
+    assert np.array_equal(grid, t) and fs == pytest.approx(100.0) and np.allclose(y[:, 1], 2 * v)
+    grid, y, fs = pair_channels((t, v), (t + 5_000_000, v), cfg)  # 5 ms apart: resampled
+    assert np.all(np.diff(grid) == 10_000_000)
+    assert np.allclose(y[:, 0], np.sin(grid / NS), atol=1e-4)
+    assert pair_channels((t[:500], v[:500]), (t[600:], v[600:]), cfg) == \
+        "front and rear samples do not overlap in time"
+
+
+def test_speed_varying_within_the_window_is_not_used(run):
+    stamps, accel = run
+    est = online(speed_mps=0.0)
+    for t in stamps[::100].tolist():
+        est.add_speed(t, 25.0 + 5.0 * (t - stamps[0]) / (60 * NS))  # +18 % per window
+    updates = [u for u in feed(est, stamps, accel) if u.window_fill >= 0.8]
+    assert updates and all(not u.published and "speed varied" in u.message for u in updates)
+
+
+@pytest.mark.parametrize(
+    ("changes", "name"),
+    [({"window_s": -1.0}, "window_s"), ({"update_period_s": 200.0}, "update_period_s"),
+     ({"min_window_fill": 0.0}, "min_window_fill"), ({"max_gap_s": 0.0}, "max_gap_s")],
+)
+def test_invalid_config_names_the_parameter(changes, name):
+    with pytest.raises(ConfigError, match=name):
+        OnlineConfig(**changes)
+
+
+def test_fast_sensors_are_decimated_to_max_rate():
+    fast = Simulation(SimConfig(duration_s=130.0, seed=4, rate_hz=1000.0)).run(130.0)
+    slow = Simulation(SimConfig(duration_s=130.0, seed=4, rate_hz=100.0)).run(130.0)
+    results = []
+    for block in (fast, slow):
+        est = online()
+        t = np.round(block.t_s * NS).astype(np.int64)
+        for c in (0, 1):
+            est.add_batch(np.full(t.size, c), t, block.accel_mps2[:, c])
+        results.append([u for u in est.process() if u.published][-1])
+    assert results[0].fs_hz == pytest.approx(100.0) and results[0].estimate.n_samples == 6000
+    # the same car, the same road: the 1 kHz sensors decimated agree with 100 Hz ones
+    assert np.allclose(results[0].estimate.params, results[1].estimate.params, rtol=0.03)
