@@ -1,0 +1,284 @@
+"""Numeric fields of serialised ROS 2 messages, read for many messages at once.
+
+A :class:`FieldReader` compiles a dotted field path (``linear_acceleration.z``) of a
+message type into the walk over its CDR layout: fixed-size parts are skipped by their
+size, strings and sequences of primitives by the length they carry, each step aligned
+(XCDR1, little endian, alignment relative to the payload after the 4-byte
+encapsulation header). The walk runs on numpy arrays of offsets, one per message, so a
+batch of 50 000 Imu messages is decoded in a few milliseconds whatever their
+``frame_id`` lengths; ``rosbags``' deserialiser (about 25 µs a message) is the fallback
+for what the walk cannot do: ROS 1 messages, big-endian CDR, or a field behind a
+sequence of messages.
+
+The message's stamp is ``header.stamp`` when the type starts with a ``std_msgs/Header``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from operator import attrgetter
+from typing import Any
+
+import numpy as np
+
+from rozyn_estimator.errors import ConfigError
+
+NS = 1_000_000_000
+# rosbags base type name -> (numpy dtype, size in bytes)
+PRIMITIVES = {
+    "bool": ("u1", 1),
+    "byte": ("u1", 1),
+    "char": ("u1", 1),
+    "int8": ("i1", 1),
+    "uint8": ("u1", 1),
+    "int16": ("<i2", 2),
+    "uint16": ("<u2", 2),
+    "int32": ("<i4", 4),
+    "uint32": ("<u4", 4),
+    "int64": ("<i8", 8),
+    "uint64": ("<u8", 8),
+    "float32": ("<f4", 4),
+    "float64": ("<f8", 8),
+}
+NUMERIC = frozenset(PRIMITIVES) - {"byte", "char"}
+BASE, NAME, ARRAY, SEQUENCE = 1, 2, 3, 4  # rosbags.interfaces.Nodetype values
+STAMP_FIELDS = ("header.stamp.sec", "header.stamp.nanosec")
+
+
+@dataclass(frozen=True)
+class Packed:
+    """Serialised messages back to back: message ``i`` is ``buf[starts[i]:starts[i] + lengths[i]]``."""
+
+    buf: np.ndarray  # uint8
+    starts: np.ndarray  # int64
+    lengths: np.ndarray  # int64
+
+    @classmethod
+    def of(cls, data: Sequence[bytes]) -> Packed:
+        lengths = np.fromiter(map(len, data), np.int64, len(data))
+        starts = np.zeros(len(data), np.int64)
+        np.cumsum(lengths[:-1], out=starts[1:])
+        return cls(np.frombuffer(b"".join(data), np.uint8), starts, lengths)
+
+    def __len__(self) -> int:
+        return self.starts.size
+
+    def message(self, i: int) -> bytes:
+        start = int(self.starts[i])
+        return self.buf[start : start + int(self.lengths[i])].tobytes()
+
+    def take(self, idx: np.ndarray) -> Packed:
+        """The messages at ``idx`` (sharing the buffer)."""
+        return Packed(self.buf, self.starts[idx], self.lengths[idx])
+
+
+@dataclass(frozen=True)
+class _Op:
+    """One step of a walk: skip ``nbytes`` aligned to ``align``, or a counted part."""
+
+    kind: str  # "fixed" | "string" | "sequence" | "read"
+    align: int = 1
+    nbytes: int = 0  # fixed: bytes to skip; sequence: element size
+    dtype: str = ""  # read: numpy dtype
+
+
+def field_type(typestore: Any, msgtype: str, path: str) -> str:
+    """The base type of a dotted field (``float64`` …) or a description of what it is.
+
+    Raises:
+        ConfigError: the type has no such field (the message lists its numeric fields).
+    """
+    parts = path.split(".")
+    current = msgtype
+    for depth, part in enumerate(parts):
+        fields = dict(typestore.fielddefs[current][1])
+        if part not in fields:
+            where = ".".join(parts[:depth]) or msgtype
+            choices = ", ".join(numeric_fields(typestore, msgtype)) or "none"
+            raise ConfigError(f"{where} has no field {part!r}; numeric fields of {msgtype}: {choices}")
+        kind, detail = fields[part]
+        last = depth == len(parts) - 1
+        if kind == NAME:
+            if last:
+                return f"a message ({detail})"
+            current = detail
+        elif kind == BASE:
+            if not last:
+                raise ConfigError(
+                    f"{'.'.join(parts[: depth + 1])} of {msgtype} is a {detail[0]}, not a message"
+                )
+            return detail[0]
+        else:
+            return "an array" if kind == ARRAY else "a sequence"
+    raise AssertionError("unreachable")
+
+
+def numeric_fields(typestore: Any, msgtype: str, prefix: str = "") -> list[str]:
+    """Every dotted numeric field of a type (arrays and sequences left out)."""
+    out = []
+    for name, (kind, detail) in typestore.fielddefs[msgtype][1]:
+        if kind == BASE and detail[0] in NUMERIC:
+            out.append(prefix + name)
+        elif kind == NAME:
+            out += numeric_fields(typestore, detail, f"{prefix}{name}.")
+    return out
+
+
+class FieldReader:
+    """Reads numeric fields (and the header stamp) of one message type from raw messages.
+
+    Args:
+        typestore: rosbags typestore holding the type's definition.
+        msgtype: e.g. ``sensor_msgs/msg/Imu``.
+        fields: dotted numeric fields, e.g. ``("linear_acceleration.z",)``.
+        deserialize: ``(data, msgtype) -> message``, the slow path.
+        cdr: the messages are CDR (rosbag2); False for ROS 1 bags (slow path only).
+
+    Raises:
+        ConfigError: a field does not exist or is not a number (says which and lists
+            the type's numeric fields).
+    """
+
+    def __init__(
+        self,
+        typestore: Any,
+        msgtype: str,
+        fields: Sequence[str],
+        deserialize: Callable[[bytes, str], Any],
+        *,
+        cdr: bool = True,
+    ) -> None:
+        if msgtype not in typestore.fielddefs:
+            raise ConfigError(f"type {msgtype} has no definition in the bag")
+        for path in fields:
+            kind = field_type(typestore, msgtype, path)
+            if kind not in NUMERIC:
+                choices = ", ".join(numeric_fields(typestore, msgtype)) or "none"
+                raise ConfigError(
+                    f"field {path} of {msgtype} is {_article(kind)}, not a number; numeric fields: {choices}"
+                )
+        self.msgtype = msgtype
+        self.fields = tuple(fields)
+        first = typestore.fielddefs[msgtype][1][:1]
+        self.has_header = (
+            bool(first) and first[0][0] == "header" and first[0][1] == (NAME, "std_msgs/msg/Header")
+        )
+        self._deserialize = deserialize
+        self._getters = [attrgetter(f) for f in self.fields]
+        paths = self.fields + (STAMP_FIELDS if self.has_header else ())
+        walks = [_compile(typestore, msgtype, p.split(".")) for p in paths] if cdr else []
+        self._walks = walks if walks and all(w is not None for w in walks) else None
+        self.vectorised = self._walks is not None
+
+    def read(self, messages: Packed | Sequence[bytes]) -> tuple[np.ndarray | None, np.ndarray]:
+        """(header stamps [ns] or None, values ``(n, len(fields))`` as float64)."""
+        packed = messages if isinstance(messages, Packed) else Packed.of(messages)
+        if len(packed) and self._walks is not None:
+            out = _read_vectorised(self._walks, packed)
+            if out is not None:
+                values = np.column_stack([c.astype(np.float64) for c in out[: len(self.fields)]])
+                stamps = None
+                if self.has_header:
+                    sec, nanosec = out[len(self.fields) :]
+                    stamps = sec.astype(np.int64) * NS + nanosec.astype(np.int64)
+                return stamps, values
+        return self._read_slow(packed)
+
+    def _read_slow(self, packed: Packed) -> tuple[np.ndarray | None, np.ndarray]:
+        values = np.empty((len(packed), len(self.fields)))
+        stamps = np.empty(len(packed), np.int64) if self.has_header else None
+        for i in range(len(packed)):
+            msg = self._deserialize(packed.message(i), self.msgtype)
+            values[i] = [float(g(msg)) for g in self._getters]
+            if stamps is not None:
+                stamps[i] = msg.header.stamp.sec * NS + msg.header.stamp.nanosec
+        return stamps, values
+
+
+def _article(kind: str) -> str:
+    return kind if kind.startswith("a") else f"a {kind}"
+
+
+def _compile(typestore: Any, msgtype: str, path: list[str]) -> list[_Op] | None:
+    """The walk to a field, or None if it passes something the walk cannot skip."""
+    ops: list[_Op] = []
+    current = msgtype
+    for depth, part in enumerate(path):
+        for name, (kind, detail) in typestore.fielddefs[current][1]:
+            if name == part:
+                break
+            if not _skip(typestore, kind, detail, ops):
+                return None
+        if depth == len(path) - 1:
+            dtype, size = PRIMITIVES[detail[0]]
+            ops.append(_Op("read", size, size, dtype))
+        else:
+            current = detail
+    return ops
+
+
+def _skip(typestore: Any, kind: int, detail: Any, ops: list[_Op]) -> bool:
+    """Append the steps that skip one field; False if its size cannot be walked."""
+    if kind == BASE:
+        name = detail[0]
+        if name == "string":
+            ops.append(_Op("string", 4))
+            return True
+        if name not in PRIMITIVES:
+            return False  # wstring
+        size = PRIMITIVES[name][1]
+        ops.append(_Op("fixed", size, size))
+        return True
+    if kind == NAME:
+        return all(_skip(typestore, k, d, ops) for _, (k, d) in typestore.fielddefs[detail][1])
+    (elem_kind, elem_detail), length = detail
+    if kind == ARRAY:
+        if elem_kind == BASE and elem_detail[0] in PRIMITIVES:
+            size = PRIMITIVES[elem_detail[0]][1]
+            ops.append(_Op("fixed", size, size * length))
+            return True
+        return all(_skip(typestore, elem_kind, elem_detail, ops) for _ in range(length))
+    if elem_kind == BASE and elem_detail[0] in PRIMITIVES:  # sequence of primitives
+        ops.append(_Op("sequence", 4, PRIMITIVES[elem_detail[0]][1]))
+        return True
+    return False
+
+
+def _align(pos: np.ndarray, align: int) -> np.ndarray:
+    """Offsets aligned relative to the payload start (after the 4-byte encapsulation)."""
+    if align == 1:
+        return pos
+    return 4 + (pos - 4 + (align - 1)) // align * align
+
+
+def _gather(buf: np.ndarray, at: np.ndarray, size: int, dtype: str) -> np.ndarray:
+    return buf[at[:, None] + np.arange(size)].view(dtype).ravel()
+
+
+def _read_vectorised(walks: list[list[_Op]], packed: Packed) -> list[np.ndarray] | None:
+    """The fields of every message, or None if a message is not little-endian CDR or too short."""
+    buf, starts, lengths = packed.buf, packed.starts, packed.lengths
+    if lengths.min() < 4 or np.any(buf[starts] != 0) or np.any(buf[starts + 1] != 1):
+        return None  # CDR_LE is 00 01
+    ends = starts + lengths
+    out = []
+    for walk in walks:
+        pos = np.full(len(starts), 4, np.int64)
+        for op in walk:
+            pos = _align(pos, op.align)
+            if op.kind == "fixed":
+                pos = pos + op.nbytes
+                continue
+            if np.any(starts + pos + (op.nbytes if op.kind == "read" else 4) > ends):
+                return None
+            if op.kind == "read":
+                out.append(_gather(buf, starts + pos, op.nbytes, op.dtype))
+                break
+            count = _gather(buf, starts + pos, 4, "<u4").astype(np.int64)
+            pos = pos + 4
+            if op.kind == "string":
+                pos = pos + count
+            else:
+                pos = np.where(count > 0, _align(pos, op.nbytes) + count * op.nbytes, pos)
+    return out
