@@ -42,8 +42,11 @@ def _add_trial_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--duration-s", type=float, default=100.0, help="measurement time (default: 100)")
     p.add_argument("--rate-hz", type=float, default=100.0, help="accelerometer rate (default: 100)")
     p.add_argument("--noise-std-mps2", type=float, default=0.0, help="white sensor noise (default: 0)")
-    p.add_argument("--method", choices=tuple(METHODS), default="rozyn",
-                   help="estimation method (default: rozyn)")
+    p.add_argument("--noise-fraction", type=float, default=0.0, metavar="F",
+                   help="white sensor noise as a share of each channel's rms, e.g. 0.1 (default: 0)")
+    p.add_argument("--method", choices=tuple(METHODS), default="likelihood",
+                   help="estimation method (default: likelihood, the nodes' default: Rozyn's pipeline "
+                        "then the likelihood refinement; rozyn: Rozyn's pipeline alone)")
     _add_vehicle(p)
 
 
@@ -55,6 +58,7 @@ def _trial_spec(args: argparse.Namespace):  # -> TrialSpec (lazy import keeps --
         road=args.road, road_class=args.road_class, amplitudes=args.amplitudes,
         laplace_nu=args.laplace_nu, waviness=args.waviness, speed_kmh=args.speed_kmh,
         duration_s=args.duration_s, rate_hz=args.rate_hz, noise_std_mps2=args.noise_std_mps2,
+        noise_fraction=args.noise_fraction,
         vehicle=load_vehicle(args.vehicle) if args.vehicle else Vehicle(), method=args.method,
     )
 
@@ -100,7 +104,11 @@ def format_trials(spec, results) -> str:
             err = (e.params[i] / r.truth[i] - 1) * 100
             lines.append(f"{label:<26}{r.truth[i]:>10.4g}{e.params[i]:>12.4g}{s:>10}{err:>+10.2f}")
         modes = ", ".join(f"{m.freq_hz:.3f} Hz (damping {m.damping_ratio:.3f})" for m in e.modes)
-        lines += ["", f"modes: {modes}", f"update time: {e.elapsed_ms:.1f} ms", *e.notes]
+        lines += ["", f"estimate from: {e.stage}"]
+        if e.rozyn is not None and e.rozyn.ok:
+            p = e.rozyn.params
+            lines.append(f"Rozyn's pipeline alone: {p[0]:.4g} kg, {p[1]:.4g} kg m^2, {p[2]:.4g} m")
+        lines += [f"modes (Rozyn's pipeline): {modes}", f"update time: {e.elapsed_ms:.1f} ms", *e.notes]
         return "\n".join(lines)
     s = summarise(results)
     lines.append(f"{'parameter':<26}{'truth':>9}{'mean':>11}{'std':>10}{'bias %':>9}"
@@ -117,17 +125,12 @@ def format_trials(spec, results) -> str:
     return "\n".join(lines)
 
 
-def cmd_demo(args: argparse.Namespace) -> int:
-    """Interim main job until the ROS nodes land: 20 seeded trials vs truth."""
-    from rozyn_estimator.trial import TrialSpec, run_trials
-
-    spec = TrialSpec()
-    results = list(run_trials(spec, range(1, 21), progress=sys.stderr.isatty()))
-    print(format_trials(spec, results))
-    return 0
-
-
 def cmd_bench(args: argparse.Namespace) -> int:
+    if args.nodes:
+        from rozyn_estimator.node_bench import run_node_bench
+
+        print(json.dumps(run_node_bench(quick=args.quick), indent=2))
+        return 0
     from rozyn_estimator.bench import run_bench
 
     print(json.dumps(run_bench(repeats=args.repeats), indent=2))
@@ -153,11 +156,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_trial)
 
-    p = sub.add_parser("demo", help="the main job: simulate and estimate, print estimate vs truth")
-    p.set_defaults(func=cmd_demo)
+    from rozyn_estimator import ros_demo
+
+    p = sub.add_parser("demo", help=ros_demo.HELP, description=ros_demo.DESCRIPTION)
+    ros_demo.add_arguments(p)
+    p.set_defaults(func=lambda a: ros_demo.run(a))
 
     p = sub.add_parser("bench", help="time the simulator and the pipeline (JSON)")
     p.add_argument("--repeats", type=int, default=20, help="timing repeats (default: 20)")
+    p.add_argument("--nodes", action="store_true",
+                   help="instead: the estimator node under load over DDS (about 3 minutes)")
+    p.add_argument("--quick", action="store_true", help="with --nodes: shorter runs (about 1 minute)")
     p.set_defaults(func=cmd_bench)
 
     for name in TOOL_MODULES:

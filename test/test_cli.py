@@ -59,3 +59,10 @@ def test_console_script_and_bench():
     for key in ("sim_100s_at_100hz_ms", "road_generation_ms", "update_120s_window_ms",
                 "update_120s_window_no_variance_ms", "peak_rss_mb"):
         assert figures[key] > 0
+
+
+def test_every_command_has_help():
+    exe = Path(sys.executable).parent / "rozyn"
+    for command in ([], ["trial"], ["demo"], ["bench"], ["replay"], ["study"], ["compare"]):
+        done = subprocess.run([str(exe), *command, "--help"], capture_output=True, text=True)
+        assert done.returncode == 0 and "usage: rozyn" in done.stdout, (command, done.stderr)
