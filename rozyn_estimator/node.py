@@ -99,6 +99,22 @@ _PIPELINE_HELP = {
     "variance": "covariance method: jackknife or none",
     "jackknife_blocks": "blocks of the jackknife",
     "min_duration_s": "shortest window the pipeline accepts [s]",
+    "refine": "after Rozyn's pipeline: likelihood (the Whittle fit of the half car) or none",
+    "likelihood.band_hz": "[min, max] frequency band of the fit [Hz]",
+    "likelihood.max_band_nyquist": "the band ends at most at this share of the Nyquist frequency",
+    "likelihood.taper": "share of the window under a cosine taper",
+    "likelihood.spectra": "cross (front/rear auto- and cross-spectra) or auto (auto-spectra only)",
+    "likelihood.aliases": "aliasing terms of the sampled spectrum modelled on each side",
+    "likelihood.estimate_waviness": "fit the road's waviness w (ISO 8608 allows w other than 2)",
+    "likelihood.road_shape_terms": "smooth departures of the road spectrum from a power law",
+    "likelihood.estimate_suspension": "fit the suspension stiffness and damping (per corner) too",
+    "likelihood.estimate_incoherence": "fit a share of the road part incoherent between the channels",
+    "likelihood.second_start": "guard against wrong basins: a second start, the lower likelihood wins",
+    "likelihood.max_noise_share": "a channel fitted as more noise than this share of its power fails",
+    "likelihood.covariance": "information in the covariance sandwich: expected or observed",
+    "likelihood.max_iter": "optimiser iterations per start",
+    "likelihood.tol": "convergence: Newton decrement below this",
+    "likelihood.noise_start": "the starts' noise floors, share of each channel's band power",
 }
 
 
