@@ -27,20 +27,26 @@ def _add_vehicle(p: argparse.ArgumentParser) -> None:
     p.add_argument("--vehicle", metavar="FILE.yaml", help="vehicle parameters (default: thesis Table 5-1)")
 
 
-def _add_trial_options(p: argparse.ArgumentParser) -> None:
-    from rozyn_estimator.pipeline import METHODS
-    from rozyn_estimator.trial import TRIAL_ROADS
-
-    p.add_argument("--road", choices=TRIAL_ROADS, default="iso", help="road model (default: iso)")
+def add_run_options(p: argparse.ArgumentParser, roads: Sequence[str], amplitudes: str) -> None:
+    """Road, speed, duration and rate of simulated runs (``trial`` and ``compare``)."""
+    p.add_argument("--road", choices=roads, default="iso", help="road model (default: iso)")
     p.add_argument("--road-class", default="A", metavar="A..H", help="ISO 8608 class (default: A)")
-    p.add_argument("--amplitudes", choices=("fixed", "gaussian"), default="fixed",
-                   help="fixed: the thesis' generator; gaussian: a true Gaussian road (default: fixed)")
+    p.add_argument("--amplitudes", choices=("fixed", "gaussian"), default=amplitudes,
+                   help="fixed: the thesis' generator; gaussian: a true Gaussian road "
+                        f"(default: {amplitudes})")
     p.add_argument("--laplace-nu", type=float, default=1.0, metavar="NU",
                    help="Laplace road: variance of the section gamma variable (default: 1.0)")
     p.add_argument("--waviness", type=float, default=2.0, metavar="W", help="ISO waviness w (default: 2)")
     p.add_argument("--speed-kmh", type=float, default=100.0, help="vehicle speed (default: 100)")
     p.add_argument("--duration-s", type=float, default=100.0, help="measurement time (default: 100)")
     p.add_argument("--rate-hz", type=float, default=100.0, help="accelerometer rate (default: 100)")
+
+
+def _add_trial_options(p: argparse.ArgumentParser) -> None:
+    from rozyn_estimator.pipeline import METHODS
+    from rozyn_estimator.trial import TRIAL_ROADS
+
+    add_run_options(p, TRIAL_ROADS, amplitudes="fixed")
     p.add_argument("--noise-std-mps2", type=float, default=0.0, help="white sensor noise (default: 0)")
     p.add_argument("--noise-fraction", type=float, default=0.0, metavar="F",
                    help="white sensor noise as a share of each channel's rms, e.g. 0.1 (default: 0)")

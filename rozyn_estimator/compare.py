@@ -20,11 +20,11 @@ import dataclasses
 import json
 import sys
 from collections.abc import Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
+from rozyn_estimator.cli import add_run_options
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.pipeline import METHODS, PARAM_NAMES
 from rozyn_estimator.trial import (
@@ -32,9 +32,8 @@ from rozyn_estimator.trial import (
     Summary,
     TrialResult,
     TrialSpec,
-    default_jobs,
     estimate_block,
-    limit_threads,
+    parallel_map,
     parse_seeds,
     simulate,
     summarise,
@@ -156,22 +155,8 @@ def compare(
 
 def _map(spec: TrialSpec, methods: Sequence[str], seeds: Sequence[int], jobs: int | None,
          progress: bool) -> Iterator[dict[str, TrialResult]]:
-    from tqdm import tqdm
-
     work = [(spec, tuple(methods), int(s)) for s in seeds]
-    jobs = default_jobs() if jobs is None else max(1, int(jobs))
-    with tqdm(total=len(work), unit="seed", disable=not progress, leave=False, dynamic_ncols=True) as bar:
-        if jobs == 1 or len(work) <= 1:
-            limit_threads()
-            for item in work:
-                yield _run_seed(item)
-                bar.update(1)
-            return
-        chunk = max(1, min(8, len(work) // (4 * jobs)))
-        with ProcessPoolExecutor(max_workers=jobs, initializer=limit_threads) as pool:
-            for result in pool.map(_run_seed, work, chunksize=chunk):
-                yield result
-                bar.update(1)
+    yield from parallel_map(_run_seed, work, jobs, progress, "seed")
 
 
 def bar_failures(s: Summary, bars: Bars) -> list[str]:
@@ -243,18 +228,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--methods", default=",".join(DEFAULT_METHODS),
                    help=f"comma list of methods (default: {','.join(DEFAULT_METHODS)}; "
                         f"known: {', '.join(METHODS)})")
-    p.add_argument("--road", choices=TRIAL_ROADS[:2], default="iso", help="road model (default: iso)")
-    p.add_argument("--road-class", default="A", metavar="A..H", help="ISO 8608 class (default: A)")
-    p.add_argument("--amplitudes", choices=("fixed", "gaussian"), default="gaussian",
-                   help="road amplitudes (default: gaussian, a true Gaussian road)")
-    p.add_argument("--laplace-nu", type=float, default=1.0, metavar="NU",
-                   help="Laplace road's nu (default: 1)")
-    p.add_argument("--waviness", type=float, default=2.0, metavar="W", help="ISO waviness w (default: 2)")
-    p.add_argument("--speed-kmh", type=float, default=100.0, help="vehicle speed (default: 100)")
+    add_run_options(p, TRIAL_ROADS[:2], amplitudes="gaussian")
     p.add_argument("--speed-variation", type=float, default=0.0, metavar="SHARE",
                    help="sinusoidal speed change, relative amplitude (default: 0)")
-    p.add_argument("--duration-s", type=float, default=100.0, help="measurement time (default: 100)")
-    p.add_argument("--rate-hz", type=float, default=100.0, help="accelerometer rate (default: 100)")
     p.add_argument("--endless-road", action="store_true",
                    help="the record is a window of an endless road, not one road period (not periodic)")
     p.add_argument("--noise", type=float, default=0.0, metavar="SHARE",

@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import time
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
@@ -182,29 +182,30 @@ def run_trials(
     spec: TrialSpec, seeds: Sequence[int], jobs: int | None = None, progress: bool = False
 ) -> Iterator[TrialResult]:
     """Trials for each seed, in seed order, on ``jobs`` processes (default: all cores)."""
+    yield from parallel_map(_run_trial_args, [(spec, int(s)) for s in seeds], jobs, progress, "trial")
+
+
+def parallel_map(
+    fn: Callable[[Any], Any], work: Sequence[Any], jobs: int | None = None, progress: bool = False,
+    unit: str = "item",
+) -> Iterator[Any]:
+    """``fn`` over ``work`` in order on ``jobs`` processes (default: all cores), one BLAS
+    thread each, with a progress bar on stderr if asked. ``fn`` must be picklable."""
+    from tqdm import tqdm
+
     jobs = default_jobs() if jobs is None else max(1, int(jobs))
-    work = [(spec, int(s)) for s in seeds]
-    bar = _progress(len(work), progress)
-    try:
+    with tqdm(total=len(work), unit=unit, disable=not progress, leave=False, dynamic_ncols=True) as bar:
         if jobs == 1 or len(work) <= 1:
             limit_threads()
             for item in work:
-                yield _run_trial_args(item)
+                yield fn(item)
                 bar.update(1)
             return
         chunk = max(1, min(16, len(work) // (4 * jobs)))
         with ProcessPoolExecutor(max_workers=jobs, initializer=limit_threads) as pool:
-            for result in pool.map(_run_trial_args, work, chunksize=chunk):
+            for result in pool.map(fn, work, chunksize=chunk):
                 yield result
                 bar.update(1)
-    finally:
-        bar.close()
-
-
-def _progress(total: int, enabled: bool) -> Any:
-    from tqdm import tqdm
-
-    return tqdm(total=total, unit="trial", disable=not enabled, leave=False, dynamic_ncols=True)
 
 
 def parse_seeds(text: str) -> list[int]:

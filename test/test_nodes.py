@@ -27,6 +27,7 @@ from rclpy.context import Context  # noqa: E402
 from rclpy.experimental import EventsExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
+from ros_helpers import ros_session  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
@@ -46,34 +47,8 @@ NS = 1_000_000_000
 @pytest.fixture
 def ros():
     """A private context, an EventsExecutor and a probe node; torn down after the test."""
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=DOMAIN)
-    executor = EventsExecutor(context=ctx)
-    probe = rclpy.create_node("probe", context=ctx)
-    executor.add_node(probe)
-    made = [probe]
-
-    class Ros:
-        context = ctx
-
-        def add(self, node):
-            made.append(node)
-            executor.add_node(node)
-            return node
-
-        def spin_until(self, condition, timeout_s):
-            deadline = time.monotonic() + timeout_s
-            while time.monotonic() < deadline and not condition():
-                executor.spin_once(timeout_sec=0.05)
-            return condition()
-
-    r = Ros()
-    r.probe = probe
-    yield r
-    for node in made:
-        node.destroy_node()
-    executor.shutdown()
-    rclpy.shutdown(context=ctx)
+    with ros_session(DOMAIN) as session:
+        yield session
 
 
 def collect(probe):

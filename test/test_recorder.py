@@ -25,11 +25,9 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 DOMAIN = 210 + os.getpid() % 15
 os.environ["ROS_DOMAIN_ID"] = str(DOMAIN)
 
-import rclpy  # noqa: E402
-from rclpy.context import Context  # noqa: E402
-from rclpy.experimental import EventsExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from ros_helpers import ros_session  # noqa: E402
 from rosbags.highlevel import AnyReader  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
 
@@ -47,33 +45,9 @@ NS = 1_000_000_000
 
 @pytest.fixture
 def ros():
-    """A private context and an EventsExecutor; nodes made through it are torn down."""
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=DOMAIN)
-    executor = EventsExecutor(context=ctx)
-    made = []
-
-    class Ros:
-        context = ctx
-
-        def add(self, node):
-            made.append(node)
-            executor.add_node(node)
-            return node
-
-        def spin_until(self, condition, timeout_s):
-            deadline = time.monotonic() + timeout_s
-            while time.monotonic() < deadline and not condition():
-                executor.spin_once(timeout_sec=0.02)
-            return condition()
-
-    r = Ros()
-    r.probe = r.add(rclpy.create_node("probe", context=ctx))
-    yield r
-    for node in made:
-        node.destroy_node()
-    executor.shutdown()
-    rclpy.shutdown(context=ctx)
+    """A private context, an EventsExecutor and a probe node; torn down after the test."""
+    with ros_session(DOMAIN) as session:
+        yield session
 
 
 def _seq_numbers(path: Path, salvage: bool = False) -> list[int]:
