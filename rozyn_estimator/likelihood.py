@@ -63,7 +63,12 @@ information (``covariance="expected"``, free) or the observed information (the H
 covariance of the score under the fitted model: with no taper and both cross-spectra that
 is the Fisher information itself; it adds what the taper correlates (neighbouring
 ordinates) and, for the auto-spectra fit, the channels' correlation that fit ignores. A
-noise floor run to zero (noise-free data) is held fixed.
+noise floor run to zero (noise-free data) is held fixed. That ``J`` assumes a stationary
+road; on a road whose roughness changes along the way (the Laplace road) the estimate
+varies more. So the score's variance is also measured from the data: the score is a
+quadratic form of the samples, split over ~12 s time blocks, whose spread (batch means,
+the road intensity's drift regressed out) estimates it whatever the road; the published
+``J`` is the mean of the model's and the blocks' (``block_weight``, see ``_covariance``).
 """
 
 from __future__ import annotations
@@ -112,6 +117,8 @@ class LikelihoodConfig:
     max_iter: int = 100  # per start
     tol: float = 1e-4  # converged when the Newton decrement gᵀF⁻¹g is below this
     noise_start: float = 1e-3  # starts' noise floors, share of each channel's band power
+    block_s: float = 12.0  # time blocks of the empirical score variance (see _block_variances)
+    block_weight: float = 0.5  # the blocks' share in the score variance (0: the model's alone)
 
     def __post_init__(self) -> None:
         lo, hi = self.band_hz
@@ -127,6 +134,8 @@ class LikelihoodConfig:
             "tol": (self.tol > 0, "must be > 0"),
             "noise_start": (0 < self.noise_start < 1, "must lie in (0, 1)"),
             "max_noise_share": (0 < self.max_noise_share <= 1, "must lie in (0, 1]"),
+            "block_s": (self.block_s > 0, "must be > 0"),
+            "block_weight": (0 <= self.block_weight <= 1, "must lie in [0, 1]"),
         }
         for name, (ok, rule) in rules.items():
             if not ok:
@@ -151,6 +160,8 @@ class Spectra:
     fs_hz: float
     n_samples: int
     window_dft: np.ndarray = field(default_factory=lambda: np.ones(1, dtype=complex))
+    dft: np.ndarray | None = None  # (k, 2) the tapered DFT d_k at the band's frequencies
+    first_bin: int = 0  # index of the band's first frequency among the window's n // 2 + 1
 
     @property
     def window_weights(self) -> np.ndarray:
@@ -183,7 +194,7 @@ def window_spectra(
     half = int(np.argmax(np.cumsum(c[: n // 2] + np.r_[0.0, c[:0:-1][: n // 2 - 1]]) >= 1.0 - 1e-4))
     window_dft = np.r_[w_hat[n - half:] if half else np.zeros(0, dtype=complex), w_hat[: half + 1]]
     return Spectra(freq_hz=freq[keep], periodogram=per, fs_hz=float(fs_hz), n_samples=n,
-                   window_dft=window_dft)
+                   window_dft=window_dft, dft=d, first_bin=int(np.argmax(keep)))
 
 
 def delay_characteristic(
@@ -469,6 +480,7 @@ class WhittleObjective:
         self.periodogram = self._restrict(per)
         self.band_power = _band_power(spectra)
         self.window_dft = spectra.window_dft
+        self.spectra = spectra
         self._key: bytes | None = None
         self._value: tuple[float, np.ndarray] | None = None
         self._parts: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -622,6 +634,7 @@ class Refinement:
     noise_std_mps2: tuple[float, float] = (math.nan, math.nan)  # fitted white sensor noise
     waviness: float = 2.0
     suspension_scale: tuple[float, ...] = ()  # fitted (k_s f, k_s r, c_s f, c_s r) / nominal
+    variance_factors: tuple[float, ...] = ()  # (m, I, lf) variances / the model sandwich's
     elapsed_ms: float = 0.0
     notes: tuple[str, ...] = field(default=())
 
@@ -750,7 +763,7 @@ def _refine(
         notes.append(f"likelihood fit: not converged in {cfg.max_iter} iterations")
     try:
         _check_noise(theta, objective, cfg)
-        cov = _covariance(objective, model, theta, cfg)
+        cov, factors = _covariance(objective, model, theta, cfg, y)
         _check(params, cov, L)
     except _FitError as exc:
         return Refinement(status="failed", reason=str(exc), params=None, theta=theta,
@@ -762,7 +775,7 @@ def _refine(
         noise_std_mps2=(float(noise[0]), float(noise[1])),
         waviness=float(theta[model.index["waviness"]]) if cfg.estimate_waviness else 2.0,
         suspension_scale=tuple(np.exp(theta[-4:]).tolist()) if cfg.estimate_suspension else (),
-        notes=tuple(notes),
+        variance_factors=tuple(factors.tolist()), notes=tuple(notes),
     )
 
 
@@ -864,8 +877,21 @@ def _start(
 
 
 def _covariance(objective: WhittleObjective, model: HalfCarSpectrum, theta: np.ndarray,
-                cfg: LikelihoodConfig) -> np.ndarray:
-    """(3, 3) covariance of (m, I, lf) from the information at the optimum."""
+                cfg: LikelihoodConfig, accel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(3, 3) covariance of (m, I, lf) from the information at the optimum, and the factors
+    the time blocks applied to the model sandwich's variances.
+
+    The score's variance along (m, I, lf) is the weighted mean of two estimates,
+    ``(1 - ω) J_model + ω J_blocks`` (``ω = cfg.block_weight``), applied to the sandwich as
+    a factor per parameter (``cov ← D cov D``, ``D = diag(√factor)``: the correlations stay).
+    ``J_model`` is exact for a stationary Gaussian road and has no sampling noise; the
+    blocks' (:func:`_block_variances`) is unbiased on any road, the non-stationary ones
+    included, but with 8-10 blocks per window it has only 6-8 degrees of freedom.
+    Used alone it would make the intervals Student-t-like (under-covering everywhere);
+    ``ω = 1/2`` counts the model as much as the blocks: on stationary roads the published
+    variance stays unbiased with half that noise, and a non-stationary road's excess is
+    carried half way. A compromise by construction, not a fit to any seeds.
+    """
     info = objective.observed_information(theta) if cfg.covariance == "observed" else objective.fisher(theta)
     # A noise floor far below its channel's power sits at its boundary (zero): the data
     # hold no information on it, so the fit is conditioned on it.
@@ -893,7 +919,124 @@ def _covariance(objective: WhittleObjective, model: HalfCarSpectrum, theta: np.n
     combos = np.zeros((3, theta.size))
     combos[:, keep] = model.physical_jacobian(theta)[:, keep] @ inv
     cov = objective.score_covariance(theta, combos)
-    return 0.5 * (cov + cov.T)
+    cov = 0.5 * (cov + cov.T)
+    factors = np.ones(3)
+    if cfg.block_weight > 0:
+        blocks = _block_variances(objective, theta, combos, accel, cfg.block_s, cfg.taper)
+        if blocks is not None and np.all(np.diag(cov) > 0):
+            factors = 1.0 + cfg.block_weight * (blocks / np.diag(cov) - 1.0)
+            scale = np.sqrt(factors)
+            cov = scale[:, None] * cov * scale[None, :]
+    return cov, factors
+
+
+_MIN_BLOCKS = 6  # fewer time blocks than this: too few for a variance (the model's J alone)
+
+
+def _block_variances(objective: WhittleObjective, theta: np.ndarray, combos: np.ndarray,
+                     accel: np.ndarray, block_s: float, taper: float) -> np.ndarray | None:
+    """Variances of ``combos ∇ℓ`` from the score's time blocks, or None (too few blocks).
+
+    Why: the model's J assumes a stationary road. A road whose roughness changes along
+    the way (the Laplace road: its intensity jumps every 100 m) makes the estimate vary
+    more than that (conditionally on the road's envelope, and through the envelope's own
+    smearing of the spectrum), and no stationary model can say by how much. The score
+    itself can: ``Σ_k tr(A_k I_k)`` with ``A_k = S⁻¹ (combos ∂S) S⁻¹`` is a quadratic form of
+    the (band-limited, tapered) samples, ``Σ_t ψ(t)`` with ``ψ(t) = ỹ_t · ẽ_t / (2 fs)``,
+    ``ẽ`` the samples filtered by ``A`` (Parseval). Summed over time blocks ``G_b`` it is a
+    sum of nearly independent terms whose spread estimates its variance whatever the
+    road (batch means: robust to heteroscedastic, non-stationary data). For the efficient
+    directions ``combos = d(m, I, lf)/dθ H⁻¹`` (road intensity and noise floors profiled
+    out) a block's expectation is zero whatever its local road intensity:
+    ``Σ_k tr(A_k S_road,k) = Σ_k tr(A_k N) = 0``.
+
+    Three details make it work:
+
+    - Blocks of ``block_s`` with raised-cosine edges as long as a block (a smooth
+      partition of unity): ``ψ`` is local only beyond the filter's span; a sharp edge
+      cuts through pairs of samples whose terms cancel only together (sharp 20 s blocks
+      overstate the variance 3-10x).
+    - The drift term: the response lags the road, so where the road's intensity ``a²``
+      changes, ``ψ``'s local mean is ``c ∂a²/∂t`` (zero in total, but a block picks up
+      ``c`` times the change of ``a²`` between its edges, far above its noise on a
+      Laplace road). It is regressed out on ``D_b = -Σ_t v_b'(t) P(t)``, ``P`` the samples'
+      local power (1 s moving average), and costs one degree of freedom.
+    - The estimate at θ̂: the blocks' sum is zero (the fit's own score), which costs
+      another degree of freedom: ``Var = B / (B - 2) Σ_b G_b²``.
+
+    With ``B`` = 8-10 blocks (100-120 s windows) the estimate has only 6-8 degrees of
+    freedom (±50-60 % on a variance): see :func:`_covariance` for how it is combined with
+    the model's J. Blocks much shorter than ``block_s`` = 12 s overstate the variance even
+    on Gaussian roads (the edges still cut the score's filter: 2x at 5 s, +10-40 % at
+    10 s at 30-70 km/h); longer ones leave too few.
+    """
+    spectra = objective.spectra
+    n, fs = spectra.n_samples, spectra.fs_hz
+    n_blocks = int(n / fs // block_s)
+    if spectra.dft is None or n_blocks < _MIN_BLOCKS or accel.shape[0] != n:
+        return None
+    psi = _score_series(objective, theta, combos)
+    weights = _partition(n, n_blocks)
+    w2 = windows.tukey(n, taper) ** 2 if taper > 0 else np.ones(n)
+    share = weights @ (w2 / w2.sum())  # each block's share of the score's expectation
+    G = weights @ psi.T  # (B, 3)
+    G -= share[:, None] * G.sum(axis=0)
+    y = accel - accel.mean(axis=0)
+    power = _moving_average(np.einsum("ta,ta->t", y, y), max(1, round(fs)))
+    drift = -(np.gradient(weights, axis=1) @ power)
+    drift -= share * drift.sum()
+    dof = n_blocks - 1
+    if drift @ drift > 0:
+        G -= np.outer(drift, (drift @ G) / (drift @ drift))
+        dof -= 1
+    return n_blocks / dof * np.einsum("bq,bq->q", G, G)
+
+
+def _score_series(objective: WhittleObjective, theta: np.ndarray, combos: np.ndarray) -> np.ndarray:
+    """(q, n) ψ(t): the score's data term ``Σ_k tr(A_k I_k)`` along each of ``combos`` as a
+    sum over the samples, ``A_k = S⁻¹ (combos ∂S) S⁻¹`` (restricted as the fit's).
+
+    ``ψ(t) = ỹ_t · ẽ_t / (2 fs)`` with ``ỹ`` the tapered samples and ``ẽ`` the samples filtered
+    by ``A``, both band-limited (inverse FFTs of ``d_k`` and ``A_k d_k`` on the band): by
+    Parseval ``Σ_t ψ(t) = Re Σ_k d_kᴴ A_k d_k / (n fs)``.
+    """
+    spectra = objective.spectra
+    n, fs, d = spectra.n_samples, spectra.fs_hz, spectra.dft
+    S, dS = objective.model.spectrum(theta)
+    S, dS = objective._restrict(S), objective._restrict(dS)
+    inv = _inv2(S)[0]
+    A = inv[None] @ np.tensordot(combos, dS, axes=1) @ inv[None]  # (q, k, 2, 2)
+    k0, k = spectra.first_bin, d.shape[0]
+    full = np.zeros((1 + combos.shape[0], n // 2 + 1, 2), dtype=complex)  # ỹ and the filtered ẽ
+    full[0, k0: k0 + k] = d
+    full[1:, k0: k0 + k] = np.einsum("qkab,kb->qka", A, d)
+    series = sfft.irfft(full, n=n, axis=1)
+    return np.einsum("ta,qta->qt", series[0], series[1:]) / (2.0 * fs)
+
+
+def _partition(n: int, n_blocks: int) -> np.ndarray:
+    """(B, n) a smooth partition of unity: B blocks, each rising and falling over a block's
+    length with raised cosines (each sample shared by at most two neighbouring blocks)."""
+    length = n / n_blocks
+    t = (np.arange(n) + 0.5) / length - 0.5  # block centres at 0, 1, ..
+    out = np.zeros((n_blocks, n))
+    for b in range(n_blocks):
+        x = np.clip(t - b, -1.0, 1.0)
+        v = np.cos(0.5 * np.pi * x) ** 2
+        if b == 0:
+            v[t < 0] = 1.0
+        if b == n_blocks - 1:
+            v[t > n_blocks - 1] = 1.0
+        out[b] = v
+    return out / out.sum(axis=0)
+
+
+def _moving_average(x: np.ndarray, width: int) -> np.ndarray:
+    """Centred moving average over ``width`` samples (shorter at the ends)."""
+    c = np.r_[0.0, np.cumsum(x)]
+    lo = np.clip(np.arange(x.size) - width // 2, 0, x.size)
+    hi = np.clip(lo + width, 0, x.size)
+    return (c[hi] - c[lo]) / (hi - lo)
 
 
 def _check(params: np.ndarray, cov: np.ndarray, L: float) -> None:
