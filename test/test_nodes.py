@@ -1,6 +1,6 @@
 """Node integration tests, launch-free: in one process and across processes.
 
-Each test session uses its own ROS_DOMAIN_ID and localhost-only discovery.
+Each test process uses ROS domains of its own (ros_helpers.domain) and localhost-only discovery.
 """
 
 from __future__ import annotations
@@ -17,17 +17,17 @@ import numpy as np
 import pytest
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-DOMAIN = 100 + os.getpid() % 100
-os.environ["ROS_DOMAIN_ID"] = str(DOMAIN)
 
-import rclpy  # noqa: E402
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from geometry_msgs.msg import InertiaStamped  # noqa: E402
-from rclpy.context import Context  # noqa: E402
-from rclpy.experimental import EventsExecutor  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
-from ros_helpers import ros_session  # noqa: E402
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import InertiaStamped
+from rclpy.context import Context
+from rclpy.experimental import EventsExecutor
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from ros_helpers import domain, ros_session
+
+DOMAIN = domain("nodes")  # and the next few: this module's private ROS domains
 from sensor_msgs.msg import Imu  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 

@@ -1,7 +1,7 @@
 """The bag recorder with DDS: signals, QoS, late and latched topics, the estimator's
 configuration, and the demo's recording replayed to the node's very estimates.
 
-Each test session uses its own ROS_DOMAIN_ID (210-229) and localhost-only discovery.
+Each test process uses ROS domains of its own (ros_helpers.domain) and localhost-only discovery.
 """
 
 from __future__ import annotations
@@ -22,12 +22,12 @@ from bag_helpers import check_bag
 from mcap.reader import make_reader
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-DOMAIN = 210 + os.getpid() % 15
-os.environ["ROS_DOMAIN_ID"] = str(DOMAIN)
 
-from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
-from ros_helpers import ros_session  # noqa: E402
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from ros_helpers import domain, ros_session
+
+DOMAIN = domain("recorder")  # and the next few: this module's private ROS domains
 from rosbags.highlevel import AnyReader  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
 
