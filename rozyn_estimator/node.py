@@ -115,6 +115,8 @@ _PIPELINE_HELP = {
     "likelihood.max_iter": "optimiser iterations per start",
     "likelihood.tol": "convergence: Newton decrement below this",
     "likelihood.noise_start": "the starts' noise floors, share of each channel's band power",
+    "likelihood.block_s": "time blocks of the covariance's empirical score variance [s]",
+    "likelihood.block_weight": "the time blocks' share in the score variance, 0..1 (0: the model's alone)",
 }
 
 

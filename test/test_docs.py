@@ -12,6 +12,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 import rclpy
 from rclpy.context import Context
+from ros_helpers import domain
 
 from rozyn_estimator.node import EstimatorNode
 from sim_node.node import SimNode
@@ -25,15 +26,19 @@ BUILT_IN = {"use_sim_time", "start_type_description_service"}
 @pytest.mark.parametrize("node_class", [EstimatorNode, SimNode])
 def test_every_parameter_is_documented(node_class):
     ctx = Context()
-    rclpy.init(context=ctx, domain_id=190 + os.getpid() % 40)
+    rclpy.init(context=ctx, domain_id=domain("docs"))
     try:
         node = node_class(context=ctx)
         declared = {name for name in node.get_parameters_by_prefix("") if name not in BUILT_IN}
+        described = {name: node.describe_parameter(name).description for name in declared}
         node.destroy_node()
     finally:
         rclpy.shutdown(context=ctx)
-    undocumented = sorted(n for n in declared if not n.startswith("vehicle.") and f"`{n}`" not in README)
+    # every parameter has a row in a README parameter table, and a real description
+    undocumented = sorted(n for n in declared if not n.startswith("vehicle.") and f"| `{n}` |" not in README)
     assert not undocumented, f"README lacks {undocumented}"
+    vague = sorted(n for n, text in described.items() if not text or text.startswith("see "))
+    assert not vague, f"parameters without a description: {vague}"
 
 
 def test_topics_and_commands_are_documented():
