@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import signal
 import sys
 import threading
@@ -203,9 +204,18 @@ def run(args: argparse.Namespace) -> int:
         total = sum(recorder.writer.writer.counts.values())
         print(
             f"\nrecorded the run to {recorder.path} ({total} messages); replay it offline with:\n"
-            f"  rozyn replay {recorder.path}"
+            f"  {_rozyn_command()} replay {recorder.path}"
         )
     return code
+
+
+def _rozyn_command() -> str:
+    """How to call ``rozyn`` from here: plain when it is on PATH, else its path (.venv/bin)."""
+    here = Path(sys.executable).parent / "rozyn"
+    found = shutil.which("rozyn")
+    if found and Path(found).resolve() == here.resolve():
+        return "rozyn"
+    return os.path.relpath(here) if here.exists() else "rozyn"
 
 
 def _wait_for_recorder(
