@@ -14,6 +14,7 @@ from typing import Any
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 
+import pytest
 import rclpy
 from rclpy.context import Context
 from rclpy.experimental import EventsExecutor
@@ -67,3 +68,15 @@ def ros_session(domain: int) -> Iterator[Ros]:
         yield ros
     finally:
         ros.close()
+
+
+def ros_fixture(domain_id: int) -> Any:
+    """A ``ros`` fixture for a test module: a private context on ``domain_id``, an
+    EventsExecutor and a probe node; torn down after each test."""
+
+    @pytest.fixture
+    def ros() -> Iterator[Ros]:
+        with ros_session(domain_id) as session:
+            yield session
+
+    return ros

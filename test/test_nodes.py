@@ -25,7 +25,7 @@ from rclpy.context import Context
 from rclpy.experimental import EventsExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from ros_helpers import domain, ros_session
+from ros_helpers import domain, ros_fixture
 
 DOMAIN = domain("nodes")  # and the next few: this module's private ROS domains
 from sensor_msgs.msg import Imu  # noqa: E402
@@ -44,11 +44,7 @@ BIN = Path(sys.executable).parent
 NS = 1_000_000_000
 
 
-@pytest.fixture
-def ros():
-    """A private context, an EventsExecutor and a probe node; torn down after the test."""
-    with ros_session(DOMAIN) as session:
-        yield session
+ros = ros_fixture(DOMAIN)
 
 
 def collect(probe):

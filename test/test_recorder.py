@@ -25,7 +25,7 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from ros_helpers import domain, ros_session
+from ros_helpers import domain, ros_fixture
 
 DOMAIN = domain("recorder")  # and the next few: this module's private ROS domains
 from rosbags.highlevel import AnyReader  # noqa: E402
@@ -43,11 +43,7 @@ BIN = Path(sys.executable).parent
 NS = 1_000_000_000
 
 
-@pytest.fixture
-def ros():
-    """A private context, an EventsExecutor and a probe node; torn down after the test."""
-    with ros_session(DOMAIN) as session:
-        yield session
+ros = ros_fixture(DOMAIN)
 
 
 def _seq_numbers(path: Path, salvage: bool = False) -> list[int]:
