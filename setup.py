@@ -2,14 +2,14 @@
 
 from glob import glob
 
-from setuptools import setup
+from setuptools import find_packages, setup
 
 PACKAGE = "rozyn_estimator"
 
 setup(
     name=PACKAGE,
     version="0.1.0",
-    packages=[PACKAGE, "sim_node"],
+    packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*", "sim_node"]),
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
@@ -25,10 +25,10 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "rozyn = rozyn_estimator.cli:main",
-            "estimator_node = rozyn_estimator.node:main",
+            "rozyn = rozyn_estimator.tools.cli:main",
+            "estimator_node = rozyn_estimator.ros.estimator_node:main",
             "sim_node = sim_node.node:main",
-            "bag_recorder = rozyn_estimator.recorder:main",
+            "bag_recorder = rozyn_estimator.ros.recorder_node:main",
         ],
     },
 )

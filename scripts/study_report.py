@@ -30,9 +30,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from rozyn_estimator import study  # noqa: E402
-from rozyn_estimator.cli import main as rozyn  # noqa: E402
-from rozyn_estimator.study_plots import grid_values  # noqa: E402
+from rozyn_estimator.tools import study  # noqa: E402
+from rozyn_estimator.tools.cli import main as rozyn  # noqa: E402
+from rozyn_estimator.tools.study.plots import grid_values  # noqa: E402
 
 STUDIES = {
     "fixed": ["--amplitudes", "fixed"],

@@ -24,7 +24,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu
 
-from rozyn_estimator import params, ros_common
+from rozyn_estimator import parameters as params
+from rozyn_estimator.ros import glue as ros_common
 from sim_node.road import AMPLITUDE_MODES, RoadSpec
 from sim_node.simulation import SimConfig, Simulation
 

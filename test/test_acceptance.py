@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rozyn_estimator.trial import TrialSpec, run_trials, summarise
+from rozyn_estimator.tools.trial import TrialSpec, run_trials, summarise
 
 from conftest import TRUTH
 

@@ -1,61 +1,127 @@
-"""DESIGN.md boundaries: a ROS-free core, and the plant and observer kept apart."""
+"""DESIGN.md boundaries, per sub-package: who may import whom, and no import cycle.
+
+The rules (README, "Layout"): the method, the online logic and bag storage are ROS-free;
+the ROS nodes and their glue use the method, the online logic and storage; only the
+tools may use the simulator; the simulator uses the shared modules and the ROS glue
+only. Every import counts, also one inside a function.
+"""
 
 from __future__ import annotations
 
 import ast
+import graphlib
 import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
-# Tools that need both the plant and the estimator (allowed to import sim_node).
-TOOLS = {"trial.py", "bench.py", "cli.py", "study.py", "study_plots.py", "compare.py", "ros_demo.py",
-         "node_bench.py"}
-ROS_MODULES = {"node.py", "recorder.py", "ros_io.py", "ros_common.py", "ros_demo.py", "ros_bag.py",
-               "node_bench.py"}
+PKG = "rozyn_estimator"
+SHARED = {f"{PKG}", f"{PKG}.errors", f"{PKG}.vehicle", f"{PKG}.parameters"}
+ROS_PACKAGES = {"rclpy", "builtin_interfaces", "diagnostic_msgs", "geometry_msgs", "sensor_msgs", "std_msgs",
+                "nav_msgs", "rcl_interfaces", "rosgraph_msgs"}
+# sub-package -> the project modules it may import (besides its own) and third-party ROS
+RULES: dict[str, tuple[set[str], bool]] = {
+    "shared": (SHARED, False),
+    f"{PKG}.method": (SHARED, False),
+    f"{PKG}.online": (SHARED | {f"{PKG}.method"}, False),
+    f"{PKG}.bag": (SHARED, False),
+    f"{PKG}.ros": (SHARED | {f"{PKG}.method", f"{PKG}.online", f"{PKG}.bag"}, True),
+    f"{PKG}.tools": ({PKG, "sim_node"}, True),
+    "sim_node": (SHARED | {f"{PKG}.ros.glue"}, True),
+}
+ROS_FREE_SIM = {"sim_node.halfcar", "sim_node.road", "sim_node.simulation"}
 
 
-def _imports(path: Path) -> set[str]:
-    names = set()
+def _modules() -> dict[str, Path]:
+    out = {}
+    for pkg in (PKG, "sim_node"):
+        for path in (ROOT / pkg).rglob("*.py"):
+            parts = path.relative_to(ROOT).with_suffix("").parts
+            name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+            out[name] = path
+    return out
+
+
+MODULES = _modules()
+
+
+def _imports(name: str) -> set[str]:
+    """Every module ``name`` imports (a ``from a import b`` of a module b counts as a.b)."""
+    path = MODULES[name]
+    is_pkg = path.name == "__init__.py"
+    out = set()
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.Import):
-            names |= {a.name.split(".")[0] for a in node.names}
-        elif isinstance(node, ast.ImportFrom) and node.module:
-            names.add(node.module.split(".")[0])
-    return names
+            out |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = name.split(".")[: len(name.split(".")) - node.level + (1 if is_pkg else 0)]
+                base = ".".join(anchor + ([base] if base else []))
+            for alias in node.names:
+                full = f"{base}.{alias.name}"
+                out.add(full if full in MODULES else base)
+    return out
 
 
-def test_estimator_never_imports_the_plant():
-    for path in (ROOT / "rozyn_estimator").glob("*.py"):
-        if path.name not in TOOLS:
-            assert "sim_node" not in _imports(path), path.name
+def _group(name: str) -> str:
+    if name in SHARED:
+        return "shared"
+    if name.startswith("sim_node"):
+        return "sim_node"
+    return ".".join(name.split(".")[:2])
 
 
-def test_plant_never_imports_the_estimator_algorithm():
-    shared = {"rozyn_estimator"}
-    for path in (ROOT / "sim_node").glob("*.py"):
-        tree = ast.parse(path.read_text())
-        allowed = {"rozyn_estimator.vehicle", "rozyn_estimator.errors", "rozyn_estimator.ros_common",
-                   "rozyn_estimator.params"}
-        for node in ast.walk(tree):
-            if isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] in shared:
-                # "from rozyn_estimator import x" imports the module rozyn_estimator.x
-                names = [node.module] if node.module != "rozyn_estimator" else \
-                    [f"{node.module}.{alias.name}" for alias in node.names]
-                for name in names:
-                    assert name in allowed, (path, name)
+def _allowed(target: str, allowed: set[str]) -> bool:
+    return any(target == a or target.startswith(a + ".") for a in allowed)
 
 
-def test_core_is_ros_free():
-    for pkg in ("rozyn_estimator", "sim_node"):
-        for path in (ROOT / pkg).glob("*.py"):
-            if path.name not in ROS_MODULES:
-                assert "rclpy" not in _imports(path), path.name
+@pytest.mark.parametrize("name", sorted(MODULES))
+def test_module_imports_follow_the_layout(name):
+    group = _group(name)
+    assert group in RULES, f"{name} is in no sub-package of the layout"
+    allowed, ros = RULES[group]
+    own = {group} if group != "shared" else set()
+    for target in _imports(name):
+        top = target.split(".")[0]
+        if top in (PKG, "sim_node"):
+            assert _allowed(target, allowed | own), f"{name} imports {target}"
+        elif top in ROS_PACKAGES:
+            assert ros and name not in ROS_FREE_SIM, f"{name} imports {target}: it must stay ROS-free"
+
+
+def test_method_uses_numpy_and_scipy_only():
+    third_party = set()
+    for name in MODULES:
+        if _group(name) == f"{PKG}.method":
+            third_party |= {t.split(".")[0] for t in _imports(name)}
+    assert third_party - set(sys.stdlib_module_names) - {PKG} <= {"numpy", "scipy"}
+
+
+def test_no_import_cycle():
+    graph = {name: {t for t in _imports(name) if t in MODULES and t != name} for name in MODULES}
+    # a module inside a package also loads the package's __init__ first
+    for name in MODULES:
+        parent = name.rpartition(".")[0]
+        if parent in MODULES and parent != name:
+            graph[name].add(parent)
+    try:
+        graphlib.TopologicalSorter(graph).prepare()
+    except graphlib.CycleError as exc:
+        pytest.fail(f"import cycle: {' -> '.join(exc.args[1])}")
+
+
+def test_no_module_is_too_long():
+    long = {n: len(p.read_text().splitlines()) for n, p in MODULES.items()}
+    assert {n: k for n, k in long.items() if k > 420} == {}
 
 
 def test_importing_the_core_loads_no_dds():
     code = (
-        "import sys, rozyn_estimator, rozyn_estimator.pipeline, rozyn_estimator.trial;"
+        "import sys, rozyn_estimator.method.pipeline, rozyn_estimator.online.estimator, "
+        "rozyn_estimator.bag.reader, rozyn_estimator.tools.trial;"
         "assert 'rclpy' not in sys.modules, 'rclpy imported'"
     )
     subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from rozyn_estimator.cli import main
+from rozyn_estimator.tools.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -8,10 +8,10 @@ import json
 import numpy as np
 import pytest
 
-from rozyn_estimator.cli import main
-from rozyn_estimator.compare import SECOND_VEHICLE, SUITES, Bars, bar_failures, compare, suite
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.trial import Summary, TrialSpec, summarise
+from rozyn_estimator.tools.cli import main
+from rozyn_estimator.tools.compare import SECOND_VEHICLE, SUITES, Bars, bar_failures, compare, suite
+from rozyn_estimator.tools.trial import Summary, TrialSpec, summarise
 
 QUICK = ["--seeds", "1-2", "--jobs", "1", "--duration-s", "40", "--quiet"]
 

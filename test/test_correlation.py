@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from statsmodels.tsa.stattools import acf, ccovf
 
-from rozyn_estimator.correlation import block_bounds, correlation_sums
+from rozyn_estimator.method.correlation import block_bounds, correlation_sums
 
 
 @pytest.fixture

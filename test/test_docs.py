@@ -14,7 +14,7 @@ import rclpy
 from rclpy.context import Context
 from ros_helpers import domain
 
-from rozyn_estimator.node import EstimatorNode
+from rozyn_estimator.ros.estimator_node import EstimatorNode
 from sim_node.node import SimNode
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.likelihood import (
+from rozyn_estimator.method.likelihood import (
     HalfCarSpectrum,
     LikelihoodConfig,
     WhittleObjective,
@@ -17,7 +17,7 @@ from rozyn_estimator.likelihood import (
     refine,
     window_spectra,
 )
-from rozyn_estimator.pipeline import METHODS, PipelineConfig, estimate
+from rozyn_estimator.method.pipeline import METHODS, PipelineConfig, estimate
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.halfcar import state_space
 from sim_node.road import REFERENCE_CPM, RoadSpec, iso_gd_n0_m3
@@ -282,7 +282,7 @@ def test_score_series_sums_to_the_score(window):
     """The time-block variance rests on Parseval: ψ(t) summed over the samples is the
     score's data term Σ_k tr(A_k I_k), tapered or not, and ψ is local (a block's sum is
     far below the sum of its |ψ|)."""
-    from rozyn_estimator.likelihood import _score_series
+    from rozyn_estimator.method.likelihood import _score_series
 
     accel, _ = window
     for taper in (0.0, 0.2):

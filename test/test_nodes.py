@@ -31,9 +31,9 @@ DOMAIN = domain("nodes")  # and the next few: this module's private ROS domains
 from sensor_msgs.msg import Imu  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
-from rozyn_estimator import ros_io  # noqa: E402
 from rozyn_estimator.errors import ConfigError  # noqa: E402
-from rozyn_estimator.node import EstimatorNode  # noqa: E402
+from rozyn_estimator.ros import messages as ros_io  # noqa: E402
+from rozyn_estimator.ros.estimator_node import EstimatorNode  # noqa: E402
 from rozyn_estimator.vehicle import Vehicle  # noqa: E402
 from sim_node.node import SimNode  # noqa: E402
 from sim_node.simulation import SimConfig, Simulation  # noqa: E402

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.online import NS, OK, WARN, OnlineConfig, OnlineEstimator, pair_channels
-from rozyn_estimator.pipeline import PipelineConfig
+from rozyn_estimator.method.pipeline import PipelineConfig
+from rozyn_estimator.online.estimator import NS, OK, WARN, OnlineConfig, OnlineEstimator, pair_channels
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.simulation import SimConfig, Simulation
 

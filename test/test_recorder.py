@@ -31,12 +31,12 @@ DOMAIN = domain("recorder")  # and the next few: this module's private ROS domai
 from rosbags.highlevel import AnyReader  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
 
-from rozyn_estimator import ros_io  # noqa: E402
-from rozyn_estimator.bag_reader import open_bag  # noqa: E402
+from rozyn_estimator.bag.reader import open_bag  # noqa: E402
 from rozyn_estimator.errors import BagError  # noqa: E402
-from rozyn_estimator.estimator_config import CUSTOM_DATA_KEY, EstimatorConfig  # noqa: E402
-from rozyn_estimator.node import EstimatorNode  # noqa: E402
-from rozyn_estimator.recorder import BagRecorder  # noqa: E402
+from rozyn_estimator.online.estimator_config import CUSTOM_DATA_KEY, EstimatorConfig  # noqa: E402
+from rozyn_estimator.ros import messages as ros_io  # noqa: E402
+from rozyn_estimator.ros.estimator_node import EstimatorNode  # noqa: E402
+from rozyn_estimator.ros.recorder_node import BagRecorder  # noqa: E402
 
 pytestmark = pytest.mark.ros
 BIN = Path(sys.executable).parent

@@ -18,13 +18,13 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 
-from rozyn_estimator import cli
-from rozyn_estimator.bag import LATCHED_QOS, SENSOR_QOS, BagWriter, Qos
-from rozyn_estimator.bag_reader import open_bag
-from rozyn_estimator.estimator_config import CUSTOM_DATA_KEY, EstimatorConfig
-from rozyn_estimator.online import OnlineConfig, OnlineEstimator
-from rozyn_estimator.pipeline import METHODS, PipelineConfig
-from rozyn_estimator.replay import CSV_COLUMNS, replay
+from rozyn_estimator.bag.reader import open_bag
+from rozyn_estimator.bag.writer import LATCHED_QOS, SENSOR_QOS, BagWriter, Qos
+from rozyn_estimator.method.pipeline import METHODS, PipelineConfig
+from rozyn_estimator.online.estimator import OnlineConfig, OnlineEstimator
+from rozyn_estimator.online.estimator_config import CUSTOM_DATA_KEY, EstimatorConfig
+from rozyn_estimator.tools import cli
+from rozyn_estimator.tools.replay import CSV_COLUMNS, replay
 from sim_node.simulation import SimConfig, Simulation
 
 NS = 1_000_000_000
@@ -280,7 +280,7 @@ def test_clear_errors(tmp_path, store, capsys):
 
 def test_errors_exit_without_a_traceback(tmp_path):
     done = subprocess.run(
-        [sys.executable, "-m", "rozyn_estimator.cli", "replay", str(tmp_path / "nothing")],
+        [sys.executable, "-m", "rozyn_estimator.tools.cli", "replay", str(tmp_path / "nothing")],
         capture_output=True,
         text=True,
         timeout=60,

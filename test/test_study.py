@@ -13,11 +13,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rozyn_estimator import study
-from rozyn_estimator.cli import main
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.pipeline import PARAM_NAMES
-from rozyn_estimator.study import Cell, StudySettings, parse_grid
+from rozyn_estimator.method.pipeline import PARAM_NAMES
+from rozyn_estimator.tools import study
+from rozyn_estimator.tools.cli import main
+from rozyn_estimator.tools.study import Cell, StudySettings, parse_grid
+from rozyn_estimator.tools.study import _all as _study_impl  # noqa: F401
 
 ROOT = Path(__file__).resolve().parents[1]
 GRID = ["--roads", "iso,laplace", "--speeds-kmh", "50,100", "--durations-s", "20:40:20", "--trials", "4"]
@@ -86,9 +87,9 @@ def test_interrupted_study_resumes_to_identical_results(reference, tmp_path, mon
             raise KeyboardInterrupt
         return real_run_chunk(chunk)
 
-    monkeypatch.setattr(study, "run_chunk", interrupted)
+    monkeypatch.setattr(study._all, "run_chunk", interrupted)
     assert _study(out, "--jobs", "1", "--chunk-trials", "2", "--no-plots") == 130
-    monkeypatch.setattr(study, "run_chunk", real_run_chunk)
+    monkeypatch.setattr(study._all, "run_chunk", real_run_chunk)
     assert len(_rows(out / "results.csv")) == 4
     assert json.loads((out / "study.json").read_text())["runs"][-1]["status"] == "interrupted"
     with (out / "results.csv").open("a") as f:
@@ -202,7 +203,7 @@ def test_default_method_is_the_rozyn_stage_without_covariance():
 def test_dask_is_imported_only_with_a_scheduler(tmp_path):
     args = ["study", "--roads", "iso", "--speeds-kmh", "50", "--durations-s", "10", "--trials", "2",
             "--jobs", "1", "--no-plots", "--quiet", "--out", str(tmp_path / "d")]
-    code = (f"import sys; from rozyn_estimator.cli import main; assert main({args!r}) == 0; "
+    code = (f"import sys; from rozyn_estimator.tools.cli import main; assert main({args!r}) == 0; "
             "assert 'distributed' not in sys.modules and 'dask' not in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT, capture_output=True)
 
@@ -221,7 +222,7 @@ def test_a_trial_that_raises_is_an_error_row_not_a_crash(monkeypatch):
             raise OverflowError("numerical result out of range")
         return real_run_trial(spec, seed)
 
-    monkeypatch.setattr(study, "run_trial", flaky)
+    monkeypatch.setattr(study._all, "run_trial", flaky)
     rows = study.run_chunk(study.plan_chunks(settings, set(), 10)[0])
     assert [r.status for r in rows] == ["ok", "error", "ok"]
     assert rows[1].reason == "OverflowError: numerical result out of range" and rows[1].params is None

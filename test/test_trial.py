@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.trial import TrialSpec, estimate_block, run_trials, simulate, summarise
+from rozyn_estimator.tools.trial import TrialSpec, estimate_block, run_trials, simulate, summarise
 from rozyn_estimator.vehicle import Vehicle
 
 SHORT = dict(amplitudes="gaussian", duration_s=40.0)

@@ -2,7 +2,7 @@
 
 ROS-free (``mcap``, ``rosbags``' message definitions, yaml). The recorder node, the demo
 and ``rozyn replay`` all write with :class:`BagWriter` (the recorder through
-:class:`QueuedBagWriter`); :mod:`rozyn_estimator.bag_reader` reads.
+:class:`QueuedBagWriter`); :mod:`rozyn_estimator.bag.reader` reads.
 
 What :class:`BagWriter` writes is what ``ros2 bag record -s mcap`` on Jazzy writes:
 

@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from rozyn_estimator.pipeline import METHODS, PipelineConfig, estimate
-from rozyn_estimator.trial import TrialSpec, limit_threads
+from rozyn_estimator.method.pipeline import METHODS, PipelineConfig, estimate
+from rozyn_estimator.tools.trial import TrialSpec, limit_threads
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.road import Road, RoadSpec
 from sim_node.simulation import SimConfig, Simulation
@@ -71,13 +71,13 @@ def run_bench(repeats: int = 20) -> dict[str, Any]:
 
 
 def _trial() -> None:
-    from rozyn_estimator.trial import run_trial
+    from rozyn_estimator.tools.trial import run_trial
 
     run_trial(TrialSpec(), 1)
 
 
 def _study_trials_per_second(repeats: int) -> float:
     """One core over the thesis grid's mix of measurement times (``rozyn study``)."""
-    from rozyn_estimator.study import bench_trials_per_second
+    from rozyn_estimator.tools.study import bench_trials_per_second
 
     return bench_trials_per_second(repeats)

@@ -1,4 +1,4 @@
-"""``estimator_node``: thin rclpy glue around :class:`~rozyn_estimator.online.OnlineEstimator`.
+"""``estimator_node``: thin rclpy glue around :class:`~rozyn_estimator.online.estimator.OnlineEstimator`.
 
 Subscribes to two ``sensor_msgs/Imu`` topics, feeds the online estimator from the
 callbacks (a dict lookup and a list append per message), runs due updates on a worker
@@ -24,10 +24,12 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 
-from rozyn_estimator import params, ros_common, ros_io
+from rozyn_estimator import parameters as params
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.estimator_config import EstimatorConfig
-from rozyn_estimator.online import Job, OnlineEstimator, Update
+from rozyn_estimator.online.estimator import Job, OnlineEstimator, Update
+from rozyn_estimator.online.estimator_config import EstimatorConfig
+from rozyn_estimator.ros import glue as ros_common
+from rozyn_estimator.ros import messages as ros_io
 
 NODE_NAME = "estimator_node"
 
@@ -168,7 +170,7 @@ class EstimatorNode(Node):
             ros_common.declare(self, name, getattr(defaults.online, name), text, bounds)
             names.append(name)
         for name, default in params.flat_fields("pipeline", defaults.pipeline):
-            text = _PIPELINE_HELP.get(name.removeprefix("pipeline."), "see rozyn_estimator.pipeline")
+            text = _PIPELINE_HELP.get(name.removeprefix("pipeline."), "see rozyn_estimator.method.pipeline")
             ros_common.declare(self, name, default, text)
             names.append(name)
         self._param_names = names + ros_common.declare_vehicle(self)

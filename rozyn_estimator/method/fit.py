@@ -26,7 +26,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from rozyn_estimator.identification import IdentificationError, Mode
+from rozyn_estimator.method.identification import IdentificationError, Mode
 from rozyn_estimator.vehicle import Vehicle
 
 STIFFNESS_MODELS = ("eq2-21", "eq2-22", "condensed")

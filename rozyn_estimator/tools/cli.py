@@ -43,8 +43,8 @@ def add_run_options(p: argparse.ArgumentParser, roads: Sequence[str], amplitudes
 
 
 def _add_trial_options(p: argparse.ArgumentParser) -> None:
-    from rozyn_estimator.pipeline import METHODS
-    from rozyn_estimator.trial import TRIAL_ROADS
+    from rozyn_estimator.method.pipeline import METHODS
+    from rozyn_estimator.tools.trial import TRIAL_ROADS
 
     add_run_options(p, TRIAL_ROADS, amplitudes="fixed")
     p.add_argument("--noise-std-mps2", type=float, default=0.0, help="white sensor noise (default: 0)")
@@ -57,7 +57,7 @@ def _add_trial_options(p: argparse.ArgumentParser) -> None:
 
 
 def _trial_spec(args: argparse.Namespace):  # -> TrialSpec (lazy import keeps --help fast)
-    from rozyn_estimator.trial import TrialSpec
+    from rozyn_estimator.tools.trial import TrialSpec
     from rozyn_estimator.vehicle import Vehicle, load_vehicle
 
     return TrialSpec(
@@ -70,7 +70,7 @@ def _trial_spec(args: argparse.Namespace):  # -> TrialSpec (lazy import keeps --
 
 
 def cmd_trial(args: argparse.Namespace) -> int:
-    from rozyn_estimator.trial import parse_seeds, run_trials
+    from rozyn_estimator.tools.trial import parse_seeds, run_trials
 
     spec = _trial_spec(args)
     seeds = parse_seeds(args.seeds if args.seeds is not None else str(args.seed))
@@ -86,7 +86,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
 
 def format_trials(spec, results) -> str:
     """Readable report of trials: one estimate in detail, or a table over seeds."""
-    from rozyn_estimator.trial import summarise
+    from rozyn_estimator.tools.trial import summarise
 
     road = {
         "iso": f"ISO 8608 class {spec.road_class.upper()} ({spec.amplitudes} amplitudes)",
@@ -133,11 +133,11 @@ def format_trials(spec, results) -> str:
 
 def cmd_bench(args: argparse.Namespace) -> int:
     if args.nodes:
-        from rozyn_estimator.node_bench import run_node_bench
+        from rozyn_estimator.tools.node_bench import run_node_bench
 
         print(json.dumps(run_node_bench(quick=args.quick), indent=2))
         return 0
-    from rozyn_estimator.bench import run_bench
+    from rozyn_estimator.tools.bench import run_bench
 
     print(json.dumps(run_bench(repeats=args.repeats), indent=2))
     return 0
@@ -162,7 +162,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_trial)
 
-    from rozyn_estimator import ros_demo
+    from rozyn_estimator.tools import demo as ros_demo
 
     p = sub.add_parser("demo", help=ros_demo.HELP, description=ros_demo.DESCRIPTION)
     ros_demo.add_arguments(p)
@@ -176,7 +176,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_bench)
 
     for name in TOOL_MODULES:
-        module_name = f"rozyn_estimator.{name}"
+        module_name = f"rozyn_estimator.tools.{name}"
         if importlib.util.find_spec(module_name) is None:
             continue
         module = importlib.import_module(module_name)

@@ -31,7 +31,7 @@ import numpy as np
 from scipy import signal
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.pipeline import PARAM_NAMES, Estimate, PipelineConfig, estimate
+from rozyn_estimator.method.pipeline import PARAM_NAMES, Estimate, PipelineConfig, estimate
 from rozyn_estimator.vehicle import Vehicle
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3

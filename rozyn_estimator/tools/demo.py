@@ -91,9 +91,9 @@ def run(args: argparse.Namespace) -> int:
     from rclpy.signals import SignalHandlerOptions
     from std_msgs.msg import Float64MultiArray
 
-    from rozyn_estimator import ros_io
-    from rozyn_estimator.node import EstimatorNode
-    from rozyn_estimator.recorder import BagRecorder, bag_path, drain
+    from rozyn_estimator.ros import messages as ros_io
+    from rozyn_estimator.ros.estimator_node import EstimatorNode
+    from rozyn_estimator.ros.recorder_node import BagRecorder, bag_path, drain
     from sim_node.node import SimNode
 
     ctx = Context()

@@ -1,7 +1,7 @@
 """``rozyn study``: the thesis' Monte-Carlo grids (chapter 5) as one command.
 
 Every (road, speed, measurement time, trial) of a grid is one seeded trial
-(:func:`rozyn_estimator.trial.run_trial`). Trials run in chunks on local processes or on
+(:func:`rozyn_estimator.tools.trial.run_trial`). Trials run in chunks on local processes or on
 a Dask distributed cluster (``--scheduler``); the parent process appends each finished
 chunk to ``results.csv``, so an interrupted study resumes where it stopped. Each trial's
 seed is a function of the study's seed base, the cell and the trial number only, and
@@ -13,7 +13,7 @@ Files in the output directory:
 - ``study.json``: the settings (compared on ``--resume``) and a log of the runs;
 - ``results.csv``: one row per trial (estimate, body modes, or the failure's reason);
 - ``summary.csv`` / ``summary.md``: per cell mean, std, bias and failures;
-- ``figures/*.png``: see :mod:`rozyn_estimator.study_plots`.
+- ``figures/*.png``: see :mod:`rozyn_estimator.tools.study.plots`.
 """
 
 from __future__ import annotations
@@ -39,8 +39,15 @@ from typing import Any
 import numpy as np
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.pipeline import METHODS, PARAM_NAMES, Estimate, PipelineConfig
-from rozyn_estimator.trial import TrialResult, TrialSpec, default_jobs, limit_threads, run_trial, summarise
+from rozyn_estimator.method.pipeline import METHODS, PARAM_NAMES, Estimate, PipelineConfig
+from rozyn_estimator.tools.trial import (
+    TrialResult,
+    TrialSpec,
+    default_jobs,
+    limit_threads,
+    run_trial,
+    summarise,
+)
 from rozyn_estimator.vehicle import Vehicle, load_vehicle, vehicle_from_mapping
 
 HELP = "Monte-Carlo grid of the thesis: speed x measurement time x road, tables and plots"
@@ -479,7 +486,7 @@ class CellSummary:
 def summarise_cells(settings: StudySettings, rows: Iterable[TrialRow]) -> list[CellSummary]:
     """One summary per cell of the grid that has results, in grid order.
 
-    Uses the same statistics as ``rozyn trial`` (:func:`rozyn_estimator.trial.summarise`).
+    Uses the same statistics as ``rozyn trial`` (:func:`rozyn_estimator.tools.trial.summarise`).
     """
     truth = np.array([settings.vehicle.sprung_mass_kg, settings.vehicle.pitch_inertia_kgm2,
                       settings.vehicle.cog_from_front_axle_m])
@@ -560,7 +567,7 @@ def cell_correlations(
 
     The same seeds give the same records as the study's trials (default: its first 100).
     """
-    from rozyn_estimator.correlation import correlation_sums
+    from rozyn_estimator.method.correlation import correlation_sums
     from sim_node.simulation import Simulation
 
     _one_blas_thread()
@@ -809,7 +816,7 @@ def write_outputs(
     focus: tuple[float, float] | None = None, jobs: int = 1,
 ) -> list[Path]:
     """Summary tables and figures from the results, on ``jobs`` processes; returns the files written."""
-    from rozyn_estimator import study_plots
+    from rozyn_estimator.tools.study import plots as study_plots
 
     summaries = summarise_cells(settings, rows)
     write_summary(summaries, out_dir / SUMMARY_CSV, out_dir / SUMMARY_MD, title=study_title(settings))

@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-from rozyn_estimator.bag import CUSTOM_DATA_RECORD, absolute_topic, default_typestore
-from rozyn_estimator.cdr import Packed
+from rozyn_estimator.bag.cdr import Packed
+from rozyn_estimator.bag.writer import CUSTOM_DATA_RECORD, absolute_topic, default_typestore
 from rozyn_estimator.errors import BagError
 
 BAG_SUFFIXES = (".mcap", ".db3", ".bag")

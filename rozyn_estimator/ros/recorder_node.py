@@ -41,10 +41,11 @@ from rclpy.parameter import parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
-from rozyn_estimator import params, ros_common
-from rozyn_estimator.bag import BagWriter, Qos, QueuedBagWriter
+from rozyn_estimator import parameters as params
+from rozyn_estimator.bag.writer import BagWriter, Qos, QueuedBagWriter
 from rozyn_estimator.errors import BagError, ConfigError
-from rozyn_estimator.estimator_config import CUSTOM_DATA_KEY, EstimatorConfig
+from rozyn_estimator.online.estimator_config import CUSTOM_DATA_KEY, EstimatorConfig
+from rozyn_estimator.ros import glue as ros_common
 
 NODE_NAME = "bag_recorder"
 DEFAULT_TOPICS = (

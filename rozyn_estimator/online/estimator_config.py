@@ -13,10 +13,10 @@ import json
 from dataclasses import dataclass
 from typing import Any
 
-from rozyn_estimator import params
+from rozyn_estimator import parameters as params
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.online import OnlineConfig
-from rozyn_estimator.pipeline import PipelineConfig
+from rozyn_estimator.method.pipeline import PipelineConfig
+from rozyn_estimator.online.estimator import OnlineConfig
 from rozyn_estimator.vehicle import Vehicle
 
 CUSTOM_DATA_KEY = "rozyn_estimator.estimator_config"

@@ -26,12 +26,18 @@ from typing import Any
 
 import numpy as np
 
-from rozyn_estimator.correlation import correlation_sums
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.fit import FIT_KINDS, STIFFNESS_MODELS, axle_shapes, characteristic_matrix, fit_inertia
-from rozyn_estimator.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
-from rozyn_estimator.likelihood import LikelihoodConfig, Refinement, refine
-from rozyn_estimator.variance import jackknife_covariance
+from rozyn_estimator.method.correlation import correlation_sums
+from rozyn_estimator.method.fit import (
+    FIT_KINDS,
+    STIFFNESS_MODELS,
+    axle_shapes,
+    characteristic_matrix,
+    fit_inertia,
+)
+from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
+from rozyn_estimator.method.likelihood import LikelihoodConfig, Refinement, refine
+from rozyn_estimator.method.variance import jackknife_covariance
 from rozyn_estimator.vehicle import Vehicle
 
 PARAM_NAMES = ("mass_kg", "pitch_inertia_kgm2", "cog_from_front_axle_m")

@@ -1,7 +1,7 @@
 """The estimator's outputs as serialised messages for a bag, without DDS.
 
 ``rozyn replay`` writes what the node would have published: the messages are built by
-the node's own converters (:mod:`rozyn_estimator.ros_io`) and serialised by rclpy's
+the node's own converters (:mod:`rozyn_estimator.ros.messages`) and serialised by rclpy's
 typesupport (``rclpy.serialization``: no ``rclpy.init``, no DDS), so they are the very
 bytes the node puts on the wire. rclpy is imported only when this module is.
 """
@@ -12,10 +12,10 @@ from collections.abc import Sequence
 
 from rclpy.serialization import serialize_message
 
-from rozyn_estimator import ros_io
-from rozyn_estimator.bag import Qos, absolute_topic
-from rozyn_estimator.estimator_config import EstimatorConfig
-from rozyn_estimator.online import Health, Update
+from rozyn_estimator.bag.writer import Qos, absolute_topic
+from rozyn_estimator.online.estimator import Health, Update
+from rozyn_estimator.online.estimator_config import EstimatorConfig
+from rozyn_estimator.ros import messages as ros_io
 
 # The node's publishers: (topic, type, offered QoS) — reliable, volatile, depth 10.
 OUTPUT_TOPICS: tuple[tuple[str, str, Qos], ...] = (

@@ -1,7 +1,7 @@
 """``rozyn replay BAG``: a bag through the online estimator, offline, no DDS.
 
 Reads a rosbag2 bag (MCAP or SQLite3) or a ROS 1 bag, feeds the accelerometer messages
-through :class:`~rozyn_estimator.online.OnlineEstimator` (the node's own online code,
+through :class:`~rozyn_estimator.online.estimator.OnlineEstimator` (the node's own online code,
 driven by the message stamps) in the order the bag received them, and writes
 
 - ``updates.csv``: one row per scheduled update (stamp, status, estimates, std,
@@ -30,12 +30,12 @@ from typing import Any
 
 import numpy as np
 
-from rozyn_estimator.bag import BagWriter, absolute_topic
-from rozyn_estimator.bag_reader import BagReader, RawBatch, open_bag
-from rozyn_estimator.cdr import FieldReader
+from rozyn_estimator.bag.cdr import FieldReader
+from rozyn_estimator.bag.reader import BagReader, RawBatch, open_bag
+from rozyn_estimator.bag.writer import BagWriter, absolute_topic
 from rozyn_estimator.errors import BagError, ConfigError
-from rozyn_estimator.estimator_config import CUSTOM_DATA_KEY, SPEED_TOPIC_TYPES, EstimatorConfig
-from rozyn_estimator.online import LEVEL_NAMES, NS, Job, OnlineEstimator, Update
+from rozyn_estimator.online.estimator import LEVEL_NAMES, NS, Job, OnlineEstimator, Update
+from rozyn_estimator.online.estimator_config import CUSTOM_DATA_KEY, SPEED_TOPIC_TYPES, EstimatorConfig
 
 HELP = "replay a bag through the online estimator offline: CSV of updates + output bag"
 DESCRIPTION = (
@@ -176,7 +176,7 @@ def resolve_config(reader: BagReader, args: argparse.Namespace) -> tuple[Estimat
 
         changes["vehicle"] = load_vehicle(args.vehicle)
     if getattr(args, "method", None):
-        from rozyn_estimator.pipeline import METHODS
+        from rozyn_estimator.method.pipeline import METHODS
 
         if args.method not in METHODS:
             raise ConfigError(f"--method: must be one of {', '.join(METHODS)}, got {args.method!r}")
@@ -461,7 +461,7 @@ class _Outputs:
         ros_bag = None
         if write_bag:
             try:
-                from rozyn_estimator import ros_bag  # rclpy's serialisation (no DDS)
+                from rozyn_estimator.ros import serialized as ros_bag  # rclpy's serialisation (no DDS)
             except ImportError as exc:
                 raise BagError(f"the output bag needs rclpy ({exc}); --no-bag writes the CSV only") from None
         out_dir.mkdir(parents=True, exist_ok=True)

@@ -1,0 +1,1 @@
+from rozyn_estimator.tools.study._all import *  # noqa: F403
