@@ -13,40 +13,15 @@ to 0 (on the axles). Pitch ``phi`` is positive nose up, so a point at ``x`` move
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import yaml
 
 from rozyn_estimator.errors import ConfigError
-
-# Keys a vehicle YAML may hold, with the unit each value is in.
-_UNITS = {
-    "sprung_mass_kg": "kg",
-    "pitch_inertia_kgm2": "kg*m^2",
-    "cog_from_front_axle_m": "m",
-    "wheelbase_m": "m",
-    "unsprung_mass_front_kg": "kg",
-    "unsprung_mass_rear_kg": "kg",
-    "tyre_stiffness_front_npm": "N/m",
-    "tyre_stiffness_rear_npm": "N/m",
-    "tyre_damping_front_nspm": "N*s/m",
-    "tyre_damping_rear_nspm": "N*s/m",
-    "suspension_stiffness_front_npm": "N/m",
-    "suspension_stiffness_rear_npm": "N/m",
-    "suspension_damping_front_nspm": "N*s/m",
-    "suspension_damping_rear_nspm": "N*s/m",
-    "sensor_front_offset_m": "m",
-    "sensor_rear_offset_m": "m",
-}
-
-
-_POSITIVE = frozenset(
-    n for n in _UNITS if not n.startswith(("sensor_", "cog_", "tyre_damping"))
-)
+from rozyn_estimator.parameters import build, check, param, spec_of
 
 
 @dataclass(frozen=True)
@@ -58,25 +33,39 @@ class Vehicle:
     assumed known to the estimator.
     """
 
-    sprung_mass_kg: float = 1000.0
-    pitch_inertia_kgm2: float = 2000.0
-    cog_from_front_axle_m: float = 1.2
-    wheelbase_m: float = 2.8
-    unsprung_mass_front_kg: float = 40.0
-    unsprung_mass_rear_kg: float = 65.0
-    tyre_stiffness_front_npm: float = 200_000.0
-    tyre_stiffness_rear_npm: float = 200_000.0
-    tyre_damping_front_nspm: float = 50.0
-    tyre_damping_rear_nspm: float = 50.0
-    suspension_stiffness_front_npm: float = 45_000.0
-    suspension_stiffness_rear_npm: float = 80_000.0
-    suspension_damping_front_nspm: float = 2800.0
-    suspension_damping_rear_nspm: float = 3500.0
-    sensor_front_offset_m: float = 0.0
-    sensor_rear_offset_m: float = 0.0
+    PARAM_PREFIX: ClassVar[str] = "vehicle."
+
+    sprung_mass_kg: float = param(1000.0, "sprung mass (the simulator's truth)", unit="kg",
+                                  low=0.0, open_low=True)
+    pitch_inertia_kgm2: float = param(2000.0, "pitch moment of inertia of the sprung mass (the simulator's "
+                                      "truth)", unit="kg*m^2", low=0.0, open_low=True)
+    cog_from_front_axle_m: float = param(1.2, "centre of gravity behind the front axle (the simulator's "
+                                         "truth)", unit="m")
+    wheelbase_m: float = param(2.8, "wheelbase", unit="m", low=0.0, open_low=True)
+    unsprung_mass_front_kg: float = param(40.0, "unsprung mass of the front corner", unit="kg",
+                                          low=0.0, open_low=True)
+    unsprung_mass_rear_kg: float = param(65.0, "unsprung mass of the rear corner", unit="kg",
+                                         low=0.0, open_low=True)
+    tyre_stiffness_front_npm: float = param(200_000.0, "front tyre vertical stiffness", unit="N/m",
+                                            low=0.0, open_low=True)
+    tyre_stiffness_rear_npm: float = param(200_000.0, "rear tyre vertical stiffness", unit="N/m",
+                                           low=0.0, open_low=True)
+    tyre_damping_front_nspm: float = param(50.0, "front tyre damping", unit="N*s/m", low=0.0)
+    tyre_damping_rear_nspm: float = param(50.0, "rear tyre damping", unit="N*s/m", low=0.0)
+    suspension_stiffness_front_npm: float = param(45_000.0, "front suspension stiffness", unit="N/m",
+                                                  low=0.0, open_low=True)
+    suspension_stiffness_rear_npm: float = param(80_000.0, "rear suspension stiffness", unit="N/m",
+                                                 low=0.0, open_low=True)
+    suspension_damping_front_nspm: float = param(2800.0, "front suspension damping", unit="N*s/m",
+                                                 low=0.0, open_low=True)
+    suspension_damping_rear_nspm: float = param(3500.0, "rear suspension damping", unit="N*s/m",
+                                                low=0.0, open_low=True)
+    sensor_front_offset_m: float = param(0.0, "front accelerometer behind the front axle", unit="m")
+    sensor_rear_offset_m: float = param(0.0, "rear accelerometer behind the rear axle (negative: ahead of "
+                                        "it)", unit="m")
 
     def __post_init__(self) -> None:
-        validate(self)
+        check(self, _RULES)
 
     @property
     def cog_from_rear_axle_m(self) -> float:
@@ -96,52 +85,29 @@ class Vehicle:
         return {f.name: float(getattr(self, f.name)) for f in fields(self)}
 
 
-def validate(v: Vehicle) -> None:
-    """Raise ConfigError naming the first invalid field of ``v``."""
-    for f in fields(v):
-        value = getattr(v, f.name)
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ConfigError(f"vehicle.{f.name}: expected a number, got {value!r}")
-        if not math.isfinite(value):
-            raise ConfigError(f"vehicle.{f.name}: must be finite, got {value!r}")
-    for name in _UNITS:
-        value = getattr(v, name)
-        if name.startswith("tyre_damping") and value < 0.0:
-            raise ConfigError(f"vehicle.{name}: must be >= 0 {_UNITS[name]}, got {value!r}")
-        if name in _POSITIVE and value <= 0.0:
-            raise ConfigError(f"vehicle.{name}: must be > 0 {_UNITS[name]}, got {value!r}")
-    lf, wb = v.cog_from_front_axle_m, v.wheelbase_m
-    if not 0.0 < lf < wb:
-        raise ConfigError(
-            f"vehicle.cog_from_front_axle_m: must lie between the axles "
-            f"(0 < lf < wheelbase_m = {wb!r} m), got {lf!r}"
-        )
-    x_front, x_rear = v.sensor_x_m
-    if x_rear - x_front < 0.25 * wb:
-        raise ConfigError(
-            "vehicle.sensor_front_offset_m / sensor_rear_offset_m: the rear accelerometer must "
-            f"sit at least a quarter wheelbase behind the front one to see pitch; they are at "
-            f"x = {x_front!r} m and {x_rear!r} m from the front axle"
-        )
+_RULES = (
+    ("cog_from_front_axle_m", lambda v: 0.0 < v.cog_from_front_axle_m < v.wheelbase_m,
+     "must lie between the axles (0 < lf < wheelbase_m)"),
+    ("sensor_rear_offset_m", lambda v: v.sensor_x_m[1] - v.sensor_x_m[0] >= 0.25 * v.wheelbase_m,
+     "the rear accelerometer must sit at least a quarter wheelbase behind the front one to see pitch "
+     "(sensor_front_offset_m is measured from the front axle, sensor_rear_offset_m from the rear one)"),
+)
+FIELD_UNITS: Mapping[str, str] = {f.name: spec_of(f).unit for f in fields(Vehicle)}  # type: ignore[union-attr]
+"""Keys a vehicle YAML may hold, with the unit each value is in."""
 
 
 def vehicle_from_mapping(data: Mapping[str, Any], *, source: str = "vehicle") -> Vehicle:
     """Build a Vehicle from a mapping; unknown keys are refused (typos must not pass)."""
     if not isinstance(data, Mapping):
         raise ConfigError(f"{source}: expected a mapping of vehicle parameters, got {type(data).__name__}")
-    unknown = sorted(set(data) - set(_UNITS))
+    unknown = sorted(set(data) - set(FIELD_UNITS))
     if unknown:
         raise ConfigError(
             f"{source}: unknown vehicle parameter(s) {', '.join(unknown)}; "
-            f"known: {', '.join(_UNITS)}"
+            f"known: {', '.join(FIELD_UNITS)}"
         )
-    values: dict[str, float] = {}
-    for key, value in data.items():
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ConfigError(f"{source}: vehicle.{key}: expected a number in {_UNITS[key]}, got {value!r}")
-        values[key] = float(value)
     try:
-        return Vehicle(**values)
+        return Vehicle(**data)
     except ConfigError as exc:
         raise ConfigError(f"{source}: {exc}") from None
 
@@ -172,7 +138,7 @@ def _vehicle_section(data: Any, source: str) -> Any:
     """Find the vehicle mapping in a flat file or a ROS 2 params file."""
     if data is None:
         return {}
-    if isinstance(data, Mapping) and not (set(data) & set(_UNITS)):
+    if isinstance(data, Mapping) and not (set(data) & set(FIELD_UNITS)):
         for node in data.values():
             params = node.get("ros__parameters") if isinstance(node, Mapping) else None
             if isinstance(params, Mapping) and isinstance(params.get("vehicle"), Mapping):
@@ -184,8 +150,24 @@ def _vehicle_section(data: Any, source: str) -> Any:
 
 def dump_vehicle(v: Vehicle) -> str:
     """The vehicle as a flat YAML mapping with units as comments."""
-    lines = [f"{k}: {getattr(v, k)!r}  # {_UNITS[k]}" for k in _UNITS]
+    lines = [f"{k}: {getattr(v, k)!r}  # {unit}" for k, unit in FIELD_UNITS.items()]
     return "\n".join(lines) + "\n"
 
 
-FIELD_UNITS: Mapping[str, str] = _UNITS
+
+def vehicle_from_parameters(values: Mapping[str, Any]) -> Vehicle:
+    """The vehicle of a node: ``vehicle_file`` when set, else the ``vehicle.<field>`` values."""
+    if values.get("vehicle_file"):
+        return load_vehicle(values["vehicle_file"])
+    return vehicle_from_mapping(
+        {k.removeprefix("vehicle."): v for k, v in values.items() if k.startswith("vehicle.")},
+        source="parameters",
+    )
+
+
+def config_from_parameters(default: Any, values: Mapping[str, Any]) -> Any:
+    """A config dataclass with a ``vehicle`` field (the nodes'), built from flat ROS values:
+    the vehicle from ``vehicle_file`` or ``vehicle.*``, the rest by name (ConfigError names
+    the first invalid parameter)."""
+    others = {k: v for k, v in values.items() if not k.startswith("vehicle.")}
+    return dataclasses.replace(build(default, others), vehicle=vehicle_from_parameters(values))

@@ -13,6 +13,7 @@ import math
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from builtin_interfaces.msg import Time
@@ -24,62 +25,44 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu
 
-from rozyn_estimator import parameters as params
+from rozyn_estimator.parameters import build, check, param
 from rozyn_estimator.ros import glue as ros_common
-from sim_node.road import AMPLITUDE_MODES, RoadSpec
+from rozyn_estimator.vehicle import config_from_parameters
 from sim_node.simulation import SimConfig, Simulation
 
 NS = 1_000_000_000
 TIME_MODES = ("realtime", "sim")
 
-# name: (default, description, range or None, read-only)
-_PARAMS: dict[str, tuple[Any, str, tuple[float, float] | None, bool]] = {
-    "road.kind": ("iso", "road model: iso (ISO 8608) or laplace (Bogsjo)", None, True),
-    "road.class": ("A", "ISO 8608 class A..H", None, True),
-    "road.amplitudes": ("fixed", "fixed (the thesis' generator) or gaussian", None, True),
-    "road.laplace_nu": (1.0, "Laplace road: variance of the section gamma variable", (0.0, 100.0), True),
-    "road.section_length_m": (100.0, "Laplace road section length [m]", (1.0, 100000.0), True),
-    "road.waviness": (2.0, "ISO 8608 waviness w", (0.5, 5.0), True),
-    "speed_kmh": (100.0, "vehicle speed [km/h]", (1.0, 400.0), True),
-    "rate_hz": (100.0, "accelerometer rate [Hz]", (1.0, 100000.0), True),
-    "seed": (1, "random seed of the road and the noise", (0, 2**31 - 1), True),
-    "noise_std_mps2": (0.0, "white sensor noise per channel [m/s^2]", (0.0, 100.0), True),
-    "duration_s": (0.0, "simulated time to run [s]; 0: forever", (0.0, 1e9), True),
-    "time_mode": ("realtime", "realtime: stamps from the clock; sim: publish /clock", None, True),
-    "real_time_factor": (1.0, "sim mode: sim seconds per wall second; 0: as fast as possible",
-                         (0.0, 10000.0), True),
-    "block_s": (0.05, "simulated time produced per tick [s]", (0.001, 10.0), True),
-    "front_topic": ("accel/front", "front accelerometer topic", None, True),
-    "rear_topic": ("accel/rear", "rear accelerometer topic", None, True),
-    "front_frame_id": ("accel_front_link", "frame_id of the front Imu", None, True),
-    "rear_frame_id": ("accel_rear_link", "frame_id of the rear Imu", None, True),
-    "truth_frame_id": ("base_link", "frame_id of the ground truth", None, True),
-    "front_axle_x_m": (0.0, "x of the front axle in truth_frame_id [m]", (-100.0, 100.0), True),
-    "qos_depth": (100, "publisher queue depth (best effort: sensor-data QoS)", (1, 100000), True),
-    "exit_when_done": (True, "shut down when duration_s has been simulated", None, True),
-    "wait_for_subscribers": (False, "start only once both accelerometer topics have a subscriber "
-                             "(so a run on sim time loses nothing to discovery)", None, True),
-}
 
 
-def _config(values: dict[str, Any]) -> SimConfig:
-    """The simulation from parameter values; ConfigError names the bad parameter."""
-    params.check_choice("road.kind", values["road.kind"], ("iso", "laplace"))
-    params.check_choice("road.amplitudes", values["road.amplitudes"], AMPLITUDE_MODES)
-    params.check_choice("time_mode", values["time_mode"], TIME_MODES)
-    for name, (default, *_rest) in _PARAMS.items():
-        if isinstance(default, float):
-            values[name] = params.number(name, values[name])
-    road = RoadSpec(
-        kind=values["road.kind"], road_class=values["road.class"], amplitudes=values["road.amplitudes"],
-        laplace_nu=values["road.laplace_nu"], section_length_m=values["road.section_length_m"],
-        waviness=values["road.waviness"],
-    )
-    return SimConfig(
-        vehicle=params.vehicle_from_parameters(values), road=road, seed=values["seed"],
-        speed_kmh=values["speed_kmh"], rate_hz=values["rate_hz"], noise_std_mps2=values["noise_std_mps2"],
-        duration_s=values["duration_s"],
-    )
+@dataclass(frozen=True)
+class SimNodeOptions:
+    """sim_node's own parameters (how the run is published, not what is simulated)."""
+
+    time_mode: str = param("realtime", "realtime: stamps from the clock; sim: publish /clock",
+                           choices=TIME_MODES, read_only=True)
+    real_time_factor: float = param(1.0, "sim mode: sim seconds per wall second; 0: as fast as possible",
+                                    low=0.0, high=10_000.0, read_only=True)
+    block_s: float = param(0.05, "simulated time produced per tick", unit="s", low=0.001, high=10.0,
+                           read_only=True)
+    front_topic: str = param("accel/front", "front accelerometer topic", read_only=True)
+    rear_topic: str = param("accel/rear", "rear accelerometer topic", read_only=True)
+    front_frame_id: str = param("accel_front_link", "frame_id of the front Imu", read_only=True)
+    rear_frame_id: str = param("accel_rear_link", "frame_id of the rear Imu", read_only=True)
+    truth_frame_id: str = param("base_link", "frame_id of the ground truth", read_only=True)
+    front_axle_x_m: float = param(0.0, "x of the front axle in truth_frame_id", unit="m", low=-100.0,
+                                  high=100.0, read_only=True)
+    qos_depth: int = param(100, "publisher queue depth (best effort: sensor-data QoS)", low=1,
+                           high=100_000, read_only=True)
+    exit_when_done: bool = param(True, "shut down when duration_s has been simulated", read_only=True)
+    wait_for_subscribers: bool = param(False, "start only once both accelerometer topics have a subscriber "
+                                       "(so a run on sim time loses nothing to discovery)", read_only=True)
+
+    def __post_init__(self) -> None:
+        check(self)
+
+
+NODE_DEFAULTS = SimConfig(seed=1)  # the node's defaults: SimConfig's, with seed 1
 
 
 def _time(ns: int) -> Time:
@@ -93,28 +76,28 @@ class SimNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(self.NAME, **kwargs)
-        names = list(_PARAMS)
-        for name, (default, text, bounds, read_only) in _PARAMS.items():
-            ros_common.declare(self, name, default, text, bounds, read_only)
-        names += ros_common.declare_vehicle(self)
-        p = ros_common.values_of(self, names)
-        self.config = _config(p)
+        names = ros_common.declare_config(self, SimNodeOptions())
+        names += ros_common.declare_config(self, NODE_DEFAULTS)
+        names.append(ros_common.declare_vehicle_file(self))
+        values = ros_common.values_of(self, names)
+        self.options: SimNodeOptions = build(SimNodeOptions(), values)
+        self.config: SimConfig = config_from_parameters(NODE_DEFAULTS, values)
         self.sim = Simulation(self.config)
-        self._p = p
-        self._sim_mode = p["time_mode"] == "sim"
-        self._rtf = p["real_time_factor"]
-        self._block_n = max(1, round(p["block_s"] * self.config.rate_hz))
+        o = self.options
+        self._sim_mode = o.time_mode == "sim"
+        self._rtf = o.real_time_factor
+        self._block_n = max(1, round(o.block_s * self.config.rate_hz))
         self._epoch_ns = 0 if self._sim_mode else self.get_clock().now().nanoseconds
         self._wall_start = time.monotonic()
         self.finished = False
         self.published = 0
 
-        sensor_qos = QoSProfile(depth=p["qos_depth"], reliability=ReliabilityPolicy.BEST_EFFORT)
+        sensor_qos = QoSProfile(depth=o.qos_depth, reliability=ReliabilityPolicy.BEST_EFFORT)
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self._pub = (self.create_publisher(Imu, p["front_topic"], sensor_qos),
-                     self.create_publisher(Imu, p["rear_topic"], sensor_qos))
-        self._msgs = (self._imu_template(p["front_frame_id"]), self._imu_template(p["rear_frame_id"]))
+        self._pub = (self.create_publisher(Imu, o.front_topic, sensor_qos),
+                     self.create_publisher(Imu, o.rear_topic, sensor_qos))
+        self._msgs = (self._imu_template(o.front_frame_id), self._imu_template(o.rear_frame_id))
         self._pub_speed = self.create_publisher(TwistStamped, "sim/speed", 10)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._pub_truth = self.create_publisher(InertiaStamped, "sim/ground_truth", latched)
@@ -131,10 +114,12 @@ class SimNode(Node):
             period = 1e-4  # as fast as the executor turns
         self._timer = self.create_timer(period, self._tick, clock=steady)
         self.create_timer(1.0, self._publish_diagnostics, clock=steady)
-        road = f"{p['road.kind']} class {p['road.class']} ({p['road.amplitudes']})"
+        r = self.config.road
+        road = f"{r.kind} class {r.road_class} ({r.amplitudes})"
         pace = (f"sim time at {self._rtf:g}x" if self._rtf else "sim time, as fast as possible") \
             if self._sim_mode else "real time"
-        self.get_logger().info(f"simulating {road} at {p['speed_kmh']:g} km/h, {p['rate_hz']:g} Hz, {pace}")
+        c = self.config
+        self.get_logger().info(f"simulating {road} at {c.speed_kmh:g} km/h, {c.rate_hz:g} Hz, {pace}")
 
     def _imu_template(self, frame_id: str) -> Imu:
         msg = Imu()
@@ -149,10 +134,10 @@ class SimNode(Node):
         v = self.config.vehicle
         msg = InertiaStamped()
         msg.header.stamp = _time(self._epoch_ns)
-        msg.header.frame_id = self._p["truth_frame_id"]
+        msg.header.frame_id = self.options.truth_frame_id
         msg.inertia.m = v.sprung_mass_kg
         msg.inertia.iyy = v.pitch_inertia_kgm2
-        msg.inertia.com.x = self._p["front_axle_x_m"] - v.cog_from_front_axle_m
+        msg.inertia.com.x = self.options.front_axle_x_m - v.cog_from_front_axle_m
         msg.inertia.com.z = math.nan
         msg.inertia.ixx = msg.inertia.izz = msg.inertia.ixz = math.nan
         self._pub_truth.publish(msg)
@@ -170,7 +155,7 @@ class SimNode(Node):
 
     def _waiting(self) -> bool:
         """Hold the start until both accel topics are subscribed, if asked to."""
-        if not self._p["wait_for_subscribers"] or self.published:
+        if not self.options.wait_for_subscribers or self.published:
             return False
         missing = [pub.topic_name for pub in self._pub if pub.get_subscription_count() == 0]
         if missing:
@@ -204,7 +189,7 @@ class SimNode(Node):
         self.published += n
         speed = TwistStamped()
         speed.header.stamp = _time(stamps[-1])
-        speed.header.frame_id = self._p["truth_frame_id"]
+        speed.header.frame_id = self.options.truth_frame_id
         speed.twist.linear.x = float(block.speed_mps[-1])
         self._pub_speed.publish(speed)
 
@@ -213,7 +198,7 @@ class SimNode(Node):
         self._timer.cancel()
         self._publish_diagnostics()
         self.get_logger().info(f"done: {self.published} samples ({self.published / self.config.rate_hz:g} s)")
-        if not self._p["exit_when_done"]:
+        if not self.options.exit_when_done:
             self.finished = False  # keep spinning (latched truth, diagnostics)
 
     def _publish_diagnostics(self) -> None:
@@ -223,7 +208,7 @@ class SimNode(Node):
             level=DiagnosticStatus.OK, name=self.get_fully_qualified_name(), hardware_id="half_car_sim",
             message=("finished" if self.finished else "simulating") + f" at t = {sim_s:.1f} s",
             values=[
-                KeyValue(key="road", value=f"{self._p['road.kind']} {self._p['road.class']}"),
+                KeyValue(key="road", value=f"{self.config.road.kind} {self.config.road.road_class}"),
                 KeyValue(key="speed_kmh", value=f"{self.config.speed_kmh:g}"),
                 KeyValue(key="sim_time_s", value=f"{sim_s:.2f}"),
                 KeyValue(key="real_time_factor", value=f"{sim_s / wall_s:.2f}" if wall_s > 0 else "0"),

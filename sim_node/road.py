@@ -20,11 +20,13 @@ profile through the grid points.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from scipy import fft as sfft
 
 from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.parameters import check, param
 
 ROAD_KINDS = ("iso", "laplace", "flat")
 AMPLITUDE_MODES = ("fixed", "gaussian")
@@ -44,41 +46,41 @@ def iso_gd_n0_m3(road_class: str) -> float:
 
 @dataclass(frozen=True)
 class RoadSpec:
-    """What road to generate (all lengths in metres, spatial frequencies in cycles/m)."""
+    """What road to generate (all lengths in metres, spatial frequencies in cycles/m).
 
-    kind: str = "iso"
-    road_class: str = "A"
+    The described fields with a ROS name are ``sim_node``'s ``road.*`` parameters.
+    """
+
+    PARAM_PREFIX: ClassVar[str] = "road."
+
+    kind: str = param("iso", "road model: iso (ISO 8608), laplace (Bogsjo) or flat (no excitation)",
+                      choices=ROAD_KINDS, read_only=True)
+    road_class: str = param("A", "ISO 8608 class A..H", ros_name="class", read_only=True)
     gd_n0_m3: float | None = None  # overrides road_class when set
-    waviness: float = 2.0  # w of eq 4-1
-    amplitudes: str = "fixed"
-    n_min_cpm: float = 0.01  # lowest spatial frequency (w = 2 diverges at 0)
-    n_max_cpm: float = 5.0
-    dx_m: float = 0.05
-    laplace_nu: float = 1.0
-    section_length_m: float = 100.0
-    envelope_ramp_m: float = 5.0
+    waviness: float = param(2.0, "ISO 8608 waviness w (eq 4-1)", low=0.5, high=5.0, read_only=True)
+    amplitudes: str = param("fixed", "fixed (the thesis' generator) or gaussian (a true Gaussian road)",
+                            choices=AMPLITUDE_MODES, read_only=True)
+    n_min_cpm: float = param(0.01, "lowest spatial frequency (w = 2 diverges at 0)", unit="cycles/m",
+                             low=0.0, open_low=True, ros_name="")
+    n_max_cpm: float = param(5.0, "highest spatial frequency", unit="cycles/m", ros_name="")
+    dx_m: float = param(0.05, "grid spacing at most", unit="m", low=0.0, open_low=True, ros_name="")
+    laplace_nu: float = param(1.0, "Laplace road: variance of the section gamma variable (0: Gaussian)",
+                              low=0.0, high=100.0, read_only=True)
+    section_length_m: float = param(100.0, "Laplace road section length", unit="m", low=1.0, high=100_000.0,
+                                    read_only=True)
+    envelope_ramp_m: float = param(5.0, "Laplace road: length of the envelope's raised-cosine ramps",
+                                   unit="m", low=0.0, ros_name="")
 
     def __post_init__(self) -> None:
-        if self.kind not in ROAD_KINDS:
-            raise ConfigError(f"road.kind: must be one of {', '.join(ROAD_KINDS)}, got {self.kind!r}")
-        if self.amplitudes not in AMPLITUDE_MODES:
-            raise ConfigError(
-                f"road.amplitudes: must be one of {', '.join(AMPLITUDE_MODES)}, got {self.amplitudes!r}"
-            )
-        iso_gd_n0_m3(self.road_class)
-        checks = {
-            "dx_m": self.dx_m > 0,
-            "n_min_cpm": self.n_min_cpm > 0,
-            "n_max_cpm": self.n_min_cpm < self.n_max_cpm < 0.5 / self.dx_m,
-            "waviness": 0 < self.waviness < 6,
-            "laplace_nu": self.laplace_nu >= 0,
-            "section_length_m": self.section_length_m > 0,
-            "envelope_ramp_m": 0 <= self.envelope_ramp_m <= self.section_length_m,
-            "gd_n0_m3": self.gd_n0_m3 is None or self.gd_n0_m3 > 0,
-        }
-        for name, ok in checks.items():
-            if not ok:
-                raise ConfigError(f"road.{name}: invalid value {getattr(self, name)!r} ({_RULES[name]})")
+        check(self, (
+            ("road_class", lambda r: len(key := r.road_class.strip()) == 1 and key.upper() in ISO_CLASSES,
+             "must be one of A..H"),
+            ("n_max_cpm", lambda r: r.n_min_cpm < r.n_max_cpm < 0.5 / r.dx_m,
+             "must exceed n_min_cpm and stay below the grid's Nyquist 0.5/dx_m"),
+            ("envelope_ramp_m", lambda r: r.envelope_ramp_m <= r.section_length_m,
+             "must lie in [0, section_length_m]"),
+            ("gd_n0_m3", lambda r: r.gd_n0_m3 is None or r.gd_n0_m3 > 0, "must be > 0 m^3"),
+        ))
 
     @property
     def roughness_m3(self) -> float:
@@ -92,18 +94,6 @@ class RoadSpec:
         with np.errstate(divide="ignore"):
             g = self.roughness_m3 * (np.where(inside, n, 1.0) / REFERENCE_CPM) ** (-self.waviness)
         return np.where(inside, g, 0.0) if self.kind != "flat" else np.zeros_like(n)
-
-
-_RULES = {
-    "dx_m": "must be > 0 m",
-    "n_min_cpm": "must be > 0 cycles/m",
-    "n_max_cpm": "must exceed n_min_cpm and stay below the grid's Nyquist 0.5/dx_m",
-    "waviness": "must lie in (0, 6)",
-    "laplace_nu": "must be >= 0 (0 is the Gaussian road)",
-    "section_length_m": "must be > 0 m",
-    "envelope_ramp_m": "must lie in [0, section_length_m]",
-    "gd_n0_m3": "must be > 0 m^3",
-}
 
 
 class Road:

@@ -8,11 +8,12 @@ blocks equals the same run made at once and memory stays bounded however long it
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
-from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.parameters import check, param
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.halfcar import N_DOF, N_STATE, HalfCarPlant, static_state
 from sim_node.road import Road, RoadSpec
@@ -24,42 +25,41 @@ THESIS_FREE_DECAY_STATE = (-0.015, -0.015, -0.03, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 @dataclass(frozen=True)
 class SimConfig:
-    """One simulated run. Lengths in m, times in s, accelerations in m/s^2."""
+    """One simulated run. Lengths in m, times in s, accelerations in m/s^2.
 
-    vehicle: Vehicle = field(default_factory=Vehicle)
-    road: RoadSpec = field(default_factory=RoadSpec)
-    seed: int = 0
-    speed_kmh: float = 100.0
-    speed_variation: float = 0.0  # relative amplitude of a sinusoidal speed change
-    speed_period_s: float = 60.0
-    rate_hz: float = 100.0  # accelerometer output rate
-    min_internal_rate_hz: float = 500.0  # plant step rate is the next multiple of rate_hz
-    noise_std_mps2: float = 0.0  # white sensor noise, per channel
-    bias_mps2: tuple[float, float] = (0.0, 0.0)  # constant sensor offsets (front, rear)
-    include_gravity: bool = True  # REP 145: a level accelerometer at rest reads +g
-    settle_s: float = 5.0  # driven before t = 0 so the run starts stationary
-    duration_s: float = 0.0  # 0: endless (sizes the road only)
+    The described fields with a ROS name are ``sim_node``'s parameters of the same names.
+    """
+
+    PARAM_PREFIX: ClassVar[str] = ""
+
+    vehicle: Vehicle = param(description="the vehicle (vehicle.* parameters)", default_factory=Vehicle)
+    road: RoadSpec = param(description="the road (road.* parameters)", default_factory=RoadSpec)
+    seed: int = param(0, "random seed of the road and the noise", low=0, high=2**31 - 1, read_only=True)
+    speed_kmh: float = param(100.0, "vehicle speed", unit="km/h", low=1.0, high=400.0, read_only=True)
+    speed_variation: float = param(0.0, "relative amplitude of a sinusoidal speed change", low=0.0,
+                                   ros_name="")
+    speed_period_s: float = param(60.0, "period of the speed change", unit="s", low=0.0, open_low=True,
+                                  ros_name="")
+    rate_hz: float = param(100.0, "accelerometer rate", unit="Hz", low=1.0, high=100_000.0, read_only=True)
+    min_internal_rate_hz: float = param(500.0, "the plant's step rate is the next multiple of rate_hz "
+                                        "from this", unit="Hz", low=0.0, open_low=True, ros_name="")
+    noise_std_mps2: float = param(0.0, "white sensor noise per channel", unit="m/s^2", low=0.0, high=100.0,
+                                  read_only=True)
+    bias_mps2: tuple[float, float] = param((0.0, 0.0), "constant sensor offsets (front, rear)", unit="m/s^2",
+                                           length=2, ros_name="")
+    include_gravity: bool = param(True, "REP 145: a level accelerometer at rest reads +g", ros_name="")
+    settle_s: float = param(5.0, "driven before t = 0 so the run starts stationary", unit="s", low=0.0,
+                            ros_name="")
+    duration_s: float = param(0.0, "simulated time to run; 0: forever (a finite run's road period is its "
+                              "distance)", unit="s", low=0.0, high=1e9, read_only=True)
     initial_state: tuple[float, ...] | None = None  # free decay start; flat roads only
 
     def __post_init__(self) -> None:
-        checks = {
-            "speed_kmh": 0.0 < self.speed_kmh <= 400.0,
-            "speed_variation": 0.0 <= self.speed_variation < 1.0,
-            "speed_period_s": self.speed_period_s > 0.0,
-            "rate_hz": 1.0 <= self.rate_hz <= 100_000.0,
-            "min_internal_rate_hz": self.min_internal_rate_hz > 0.0,
-            "noise_std_mps2": self.noise_std_mps2 >= 0.0,
-            "settle_s": self.settle_s >= 0.0,
-            "duration_s": self.duration_s >= 0.0,
-        }
-        for name, ok in checks.items():
-            value = getattr(self, name)
-            if not (ok and math.isfinite(float(value))):
-                raise ConfigError(f"sim.{name}: invalid value {value!r}")
-        if len(self.bias_mps2) != 2 or not all(math.isfinite(b) for b in self.bias_mps2):
-            raise ConfigError(f"sim.bias_mps2: expected two finite numbers, got {self.bias_mps2!r}")
-        if self.initial_state is not None and len(self.initial_state) != N_STATE:
-            raise ConfigError(f"sim.initial_state: expected {N_STATE} numbers, got {len(self.initial_state)}")
+        check(self, (
+            ("speed_variation", lambda c: c.speed_variation < 1.0, "must lie in [0, 1)"),
+            ("initial_state", lambda c: c.initial_state is None or len(c.initial_state) == N_STATE,
+             f"expected {N_STATE} numbers"),
+        ))
 
     @property
     def speed_mps(self) -> float:

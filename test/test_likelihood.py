@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.method import METHODS, PipelineConfig, estimate
 from rozyn_estimator.method.likelihood import (
     HalfCarSpectrum,
     LikelihoodConfig,
@@ -17,7 +18,6 @@ from rozyn_estimator.method.likelihood import (
     refine,
     window_spectra,
 )
-from rozyn_estimator.method.pipeline import METHODS, PipelineConfig, estimate
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.halfcar import state_space
 from sim_node.road import REFERENCE_CPM, RoadSpec, iso_gd_n0_m3

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.method.pipeline import PipelineConfig
-from rozyn_estimator.online.estimator import NS, OK, WARN, OnlineConfig, OnlineEstimator, pair_channels
+from rozyn_estimator.method import PipelineConfig
+from rozyn_estimator.online import NS, OK, WARN, OnlineConfig, OnlineEstimator, pair_channels
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.simulation import SimConfig, Simulation
 
@@ -34,16 +34,14 @@ def feed(est: OnlineEstimator, stamps, accel, order="interleaved"):
     updates = []
     if order == "interleaved":
         for t, (a, b) in zip(stamps.tolist(), accel.tolist(), strict=True):
-            est.add(0, t, a)
-            est.add(1, t, b)
-            updates += est.process()
+            jobs = [*est.add(0, t, a), *est.add(1, t, b)]
+            updates += [est.compute(job) for job in jobs]
     else:
         n = len(stamps)
         channels = np.repeat([0, 1], n) if order == "blocks" else np.tile([1, 0], n)
         ts = np.concatenate([stamps, stamps]) if order == "blocks" else np.repeat(stamps, 2)
         vs = np.concatenate([accel[:, 0], accel[:, 1]]) if order == "blocks" else accel[:, ::-1].ravel()
-        est.add_batch(channels, ts, vs)
-        updates += est.process()
+        updates += [est.compute(job) for job, _ in est.add_batch(channels, ts, vs)]
     return updates
 
 
@@ -92,10 +90,11 @@ def test_non_finite_duplicate_and_out_of_order_samples_are_dropped(run):
     assert est.dropped["front: duplicate stamp"] == 1
     assert est.dropped["rear: out-of-order stamp"] == 1
     assert est.resets == 0
-    h = est.health()
+    assert est.health() == est.health()  # looking changes nothing
+    h = est.report()
     assert h.level == WARN and "lost 4 samples" in h.message
     assert h.values["dropped_total"] == "4" and h.values["dropped (rear: out-of-order stamp)"] == "1"
-    assert est.health().level == OK  # reported once
+    assert est.report().level == OK  # reported once
 
 
 def test_samples_lost_on_the_way_are_counted(run):
@@ -125,11 +124,12 @@ def test_batch_with_anomalies_equals_one_by_one(run):
     t[501] = t[499]  # rear duplicate
     t[2000:] += 3 * NS  # a gap on both: reset
     one, batch = online(), online()
+    one_jobs = []
     for ci, ti, vi in zip(c.tolist(), t.tolist(), v.tolist(), strict=True):
-        one.add(ci, ti, vi)
-    batch.add_batch(c, t, v)
+        one_jobs += [(job, len(one_jobs)) for job in one.add(ci, ti, vi)]
+    batch_jobs = batch.add_batch(c, t, v)
     assert one.dropped == batch.dropped and one.resets == batch.resets == 1
-    assert [u.stamp_ns for u in one.process()] == [u.stamp_ns for u in batch.process()]
+    assert [j.due_ns for j, _ in one_jobs] == [j.due_ns for j, _ in batch_jobs]
 
 
 def test_gap_and_time_jumping_back_reset_the_window(run):
@@ -150,9 +150,10 @@ def test_gap_and_time_jumping_back_reset_the_window(run):
 def test_one_silent_sensor_gives_no_estimate_and_a_warning(run):
     stamps, accel = run
     est = online()
+    jobs = []
     for t, a in zip(stamps[:8000].tolist(), accel[:8000, 0].tolist(), strict=True):
-        est.add(0, t, a)
-    assert est.process() == []
+        jobs += est.add(0, t, a)
+    assert jobs == []
     h = est.health()
     assert h.level == WARN and "waiting for rear" in h.message
     est.add(1, int(stamps[7000]), 9.8)  # the rear speaks once, then lags by 10 s
@@ -167,9 +168,9 @@ def test_rate_mismatch_and_offsets_are_resampled(run):
     est = online()
     fine = Simulation(SimConfig(duration_s=200.0, seed=3, rate_hz=400.0)).run(200.0)
     fine_t = 1000 * NS + np.round(fine.t_s * NS).astype(np.int64) + 1_300_000  # 1.3 ms late
-    est.add_batch(np.zeros(len(stamps), int), stamps, accel[:, 0])
-    est.add_batch(np.ones(len(fine_t), int), fine_t, fine.accel_mps2[:, 1])
-    updates = [u for u in est.process() if u.published]
+    jobs = est.add_batch(np.zeros(len(stamps), int), stamps, accel[:, 0])
+    jobs += est.add_batch(np.ones(len(fine_t), int), fine_t, fine.accel_mps2[:, 1])
+    updates = [u for u in (est.compute(job) for job, _ in jobs) if u.published]
     assert updates and updates[-1].fs_hz == pytest.approx(100.0)
     aligned = [u for u in feed(online(), stamps, accel) if u.published]
     assert [u.stamp_ns for u in updates] == [u.stamp_ns for u in aligned]
@@ -216,9 +217,9 @@ def test_fast_sensors_are_decimated_to_max_rate():
     for block in (fast, slow):
         est = online()
         t = np.round(block.t_s * NS).astype(np.int64)
-        for c in (0, 1):
-            est.add_batch(np.full(t.size, c), t, block.accel_mps2[:, c])
-        results.append([u for u in est.process() if u.published][-1])
+        jobs = [job for c in (0, 1)
+                for job, _ in est.add_batch(np.full(t.size, c), t, block.accel_mps2[:, c])]
+        results.append([u for u in map(est.compute, jobs) if u.published][-1])
     assert results[0].fs_hz == pytest.approx(100.0) and results[0].estimate.n_samples == 6000
     # the same car, the same road: the 1 kHz sensors decimated agree with 100 Hz ones
     assert np.allclose(results[0].estimate.params, results[1].estimate.params, rtol=0.03)

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.method import METHODS, PipelineConfig, estimate
 from rozyn_estimator.method.fit import corner_impedances
-from rozyn_estimator.method.pipeline import METHODS, PipelineConfig, _decays, _identify_and_fit, estimate
+from rozyn_estimator.method.pipeline import _decays, _identify_and_fit
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.halfcar import state_space
 from sim_node.road import RoadSpec

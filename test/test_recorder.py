@@ -33,7 +33,7 @@ from sensor_msgs.msg import Imu  # noqa: E402
 
 from rozyn_estimator.bag.reader import open_bag  # noqa: E402
 from rozyn_estimator.errors import BagError  # noqa: E402
-from rozyn_estimator.online.estimator_config import CUSTOM_DATA_KEY, EstimatorConfig  # noqa: E402
+from rozyn_estimator.online import CUSTOM_DATA_KEY, EstimatorConfig  # noqa: E402
 from rozyn_estimator.ros import messages as ros_io  # noqa: E402
 from rozyn_estimator.ros.estimator_node import EstimatorNode  # noqa: E402
 from rozyn_estimator.ros.recorder_node import BagRecorder  # noqa: E402

@@ -20,9 +20,8 @@ from rosbags.typesys import Stores, get_typestore
 
 from rozyn_estimator.bag.reader import open_bag
 from rozyn_estimator.bag.writer import LATCHED_QOS, SENSOR_QOS, BagWriter, Qos
-from rozyn_estimator.method.pipeline import METHODS, PipelineConfig
-from rozyn_estimator.online.estimator import OnlineConfig, OnlineEstimator
-from rozyn_estimator.online.estimator_config import CUSTOM_DATA_KEY, EstimatorConfig
+from rozyn_estimator.method import METHODS, PipelineConfig
+from rozyn_estimator.online import CUSTOM_DATA_KEY, EstimatorConfig, OnlineConfig, OnlineEstimator
 from rozyn_estimator.tools import cli
 from rozyn_estimator.tools.replay import CSV_COLUMNS, replay
 from sim_node.simulation import SimConfig, Simulation
@@ -113,8 +112,7 @@ def _as_the_node_does(events, config: EstimatorConfig):
         if topic == "/sim/speed":
             online.add_speed(t, float((value**2 + 0.0**2) ** 0.5))
             continue
-        online.add(0 if topic == "/accel/front" else 1, t, value)
-        updates += [online.compute(job) for job in online.take_due()]
+        updates += [online.compute(job) for job in online.add(0 if topic == "/accel/front" else 1, t, value)]
     return updates
 
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.method.pipeline import PARAM_NAMES
+from rozyn_estimator.method import PARAM_NAMES
 from rozyn_estimator.tools import study
 from rozyn_estimator.tools.cli import main
 from rozyn_estimator.tools.study import Cell, StudySettings, parse_grid

@@ -26,111 +26,13 @@ from typing import Any
 
 import numpy as np
 
-from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.method.config import PARAM_NAMES, PipelineConfig
 from rozyn_estimator.method.correlation import correlation_sums
-from rozyn_estimator.method.fit import (
-    FIT_KINDS,
-    STIFFNESS_MODELS,
-    axle_shapes,
-    characteristic_matrix,
-    fit_inertia,
-)
+from rozyn_estimator.method.fit import axle_shapes, characteristic_matrix, fit_inertia
 from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
-from rozyn_estimator.method.likelihood import LikelihoodConfig, Refinement, refine
+from rozyn_estimator.method.likelihood import Refinement, refine
 from rozyn_estimator.method.variance import jackknife_covariance
 from rozyn_estimator.vehicle import Vehicle
-
-PARAM_NAMES = ("mass_kg", "pitch_inertia_kgm2", "cog_from_front_axle_m")
-CORRELATIONS = ("multi-reference", "thesis-acf", "free-decay")
-VARIANCES = ("jackknife", "none")
-REFINES = ("likelihood", "none")
-
-
-@dataclass(frozen=True)
-class PipelineConfig:
-    """Settings of one update. Times in s, frequencies in Hz."""
-
-    identifier: str = "state-transition"
-    gamma: int = 4  # eq 2-5: p = gamma 2n/m; correlation estimates are noisy (thesis: 4-6)
-    n_dof: int = 4  # n of eq 2-4 (the half car)
-    correlation: str = "multi-reference"  # see CORRELATIONS
-    max_lag_s: float = 1.0  # length of the correlation function used as free decay
-    min_lag_s: float = 0.0  # first lag used (>= 1 sample for multi-reference)
-    skip_wheelbase_delay: bool = True  # start after wheelbase/speed when the speed is known
-    freq_band_hz: tuple[float, float] = (0.5, 4.0)
-    damping_band: tuple[float, float] = (0.02, 0.9)
-    stiffness_model: str = "eq2-22"  # see fit.STIFFNESS_MODELS
-    fit: str = "modal"  # see fit.FIT_KINDS
-    variance: str = "jackknife"
-    jackknife_blocks: int = 10
-    min_duration_s: float = 5.0
-    refine: str = "likelihood"  # see REFINES: the stage after Rozyn's pipeline
-    likelihood: LikelihoodConfig = field(default_factory=LikelihoodConfig)
-
-    def __post_init__(self) -> None:
-        choices = {
-            "identifier": tuple(IDENTIFIERS),
-            "correlation": CORRELATIONS,
-            "stiffness_model": STIFFNESS_MODELS,
-            "fit": FIT_KINDS,
-            "variance": VARIANCES,
-            "refine": REFINES,
-        }
-        for name, options in choices.items():
-            if getattr(self, name) not in options:
-                raise ConfigError(
-                    f"pipeline.{name}: must be one of {', '.join(options)}, got {getattr(self, name)!r}"
-                )
-        rules = {
-            "gamma": (self.gamma >= 1, "must be >= 1"),
-            "n_dof": (self.n_dof >= 2, "must be >= 2"),
-            "max_lag_s": (self.max_lag_s > 0, "must be > 0 s"),
-            "min_lag_s": (self.min_lag_s >= 0, "must be >= 0 s"),
-            "jackknife_blocks": (self.jackknife_blocks >= 4, "must be >= 4"),
-            "min_duration_s": (self.min_duration_s > 0, "must be > 0 s"),
-            "freq_band_hz": (0 < self.freq_band_hz[0] < self.freq_band_hz[1], "needs 0 < min < max"),
-            "damping_band": (
-                0 <= self.damping_band[0] < self.damping_band[1] <= 1.0, "needs 0 <= min < max <= 1"
-            ),
-        }
-        for name, (ok, rule) in rules.items():
-            if not ok:
-                raise ConfigError(f"pipeline.{name}: {rule}, got {getattr(self, name)!r}")
-        if self.refine == "likelihood" and self.correlation == "free-decay":
-            raise ConfigError(
-                "pipeline.refine: the likelihood refinement models a road-driven response; "
-                "use refine='none' with correlation='free-decay'"
-            )
-
-    @property
-    def p_blocks(self) -> int:
-        """p = gamma * 2n / m (eq 2-5) with m = 2 sensors."""
-        return math.ceil(self.gamma * 2 * self.n_dof / 2)
-
-    def replace(self, **changes: Any) -> PipelineConfig:
-        return dataclasses.replace(self, **changes)
-
-
-# Named methods (``rozyn trial --method``, ``rozyn compare --methods``). ``PipelineConfig()``
-# (the pipeline's default) is ``likelihood``; the ``rozyn*`` and ``thesis`` methods are
-# Rozyn's pipeline alone.
-METHODS: dict[str, PipelineConfig] = {
-    "rozyn": PipelineConfig(refine="none"),
-    "rozyn-eq2-21": PipelineConfig(stiffness_model="eq2-21", refine="none"),
-    "rozyn-condensed": PipelineConfig(stiffness_model="condensed", refine="none"),
-    # The thesis' choices, with its equations implemented correctly.
-    "thesis": PipelineConfig(
-        gamma=2, correlation="thesis-acf", stiffness_model="eq2-21", fit="stiffness-block",
-        freq_band_hz=(1.0, 3.0), damping_band=(0.1, 0.5), skip_wheelbase_delay=False, refine="none",
-    ),
-    # Rozyn's pipeline, then the Whittle fit of the half car (likelihood.py).
-    "likelihood": PipelineConfig(),
-    # ... on the auto-spectra only (for comparison: the cross-spectrum carries most information).
-    # Without the cross-spectrum, a free road shape is too close to the transfer functions'.
-    "likelihood-auto": PipelineConfig(likelihood=LikelihoodConfig(spectra="auto", road_shape_terms=0)),
-    # ... with the road's waviness and the suspension stiffness and damping as nuisance parameters.
-    "likelihood-nuisance": PipelineConfig(likelihood=LikelihoodConfig(estimate_suspension=True)),
-}
 
 
 @dataclass(frozen=True)

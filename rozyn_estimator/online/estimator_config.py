@@ -10,14 +10,15 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from rozyn_estimator import parameters as params
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.method.pipeline import PipelineConfig
-from rozyn_estimator.online.estimator import OnlineConfig
-from rozyn_estimator.vehicle import Vehicle
+from rozyn_estimator.method import PipelineConfig
+from rozyn_estimator.online.config import OnlineConfig
+from rozyn_estimator.parameters import check, param
+from rozyn_estimator.vehicle import Vehicle, config_from_parameters
 
 CUSTOM_DATA_KEY = "rozyn_estimator.estimator_config"
 SPEED_TOPIC_TYPES = {  # speed_topic_type -> (message type, fields whose norm is the speed)
@@ -34,55 +35,40 @@ class EstimatorConfig:
     namespace); relative names are taken from the root namespace.
     """
 
-    vehicle: Vehicle = dataclasses.field(default_factory=Vehicle)
-    online: OnlineConfig = dataclasses.field(default_factory=OnlineConfig)
-    pipeline: PipelineConfig = dataclasses.field(default_factory=PipelineConfig)
-    front_topic: str = "accel/front"
-    rear_topic: str = "accel/rear"
-    field: str = "linear_acceleration.z"
-    speed_topic: str = ""  # empty: online.speed_mps (0: unknown)
-    speed_topic_type: str = "twist"  # see SPEED_TOPIC_TYPES
-    frame_id: str = "base_link"
-    front_axle_x_m: float = 0.0
-    hardware_id: str = "half_car"
-    node_name: str = "/estimator_node"  # name of the diagnostic status
+    vehicle: Vehicle = param(description="the vehicle (vehicle.* parameters)", default_factory=Vehicle)
+    online: OnlineConfig = param(description="window and schedule", default_factory=OnlineConfig)
+    pipeline: PipelineConfig = param(description="each update (pipeline.* parameters)",
+                                     default_factory=PipelineConfig)
+    front_topic: str = param("accel/front", "front accelerometer topic (sensor_msgs/Imu)", read_only=True)
+    rear_topic: str = param("accel/rear", "rear accelerometer topic (sensor_msgs/Imu)", read_only=True)
+    field: str = param("linear_acceleration.z", "numeric field of the Imu message that holds the vertical "
+                       "acceleration (gravity included is fine: the mean is removed)", read_only=True)
+    speed_topic: str = param("", "optional vehicle speed topic; empty: use speed_mps", read_only=True)
+    speed_topic_type: str = param("twist", "type of speed_topic: twist (geometry_msgs/TwistStamped) or "
+                                  "odometry (nav_msgs/Odometry); the speed is the norm of linear x, y",
+                                  choices=tuple(SPEED_TOPIC_TYPES), read_only=True)
+    frame_id: str = param("base_link", "frame of the published centre of gravity")
+    front_axle_x_m: float = param(0.0, "x of the front axle in frame_id (com.x = front_axle_x_m - lf)",
+                                  unit="m", low=-100.0, high=100.0)
+    hardware_id: str = param("half_car", "hardware_id of the diagnostic status")
+    node_name: str = param("/estimator_node", "name of the diagnostic status", ros_name="")
 
     def __post_init__(self) -> None:
-        if self.speed_topic_type not in SPEED_TOPIC_TYPES:
-            choices = ", ".join(SPEED_TOPIC_TYPES)
-            raise ConfigError(f"speed_topic_type: must be one of {choices}, got {self.speed_topic_type!r}")
+        check(self)
 
     def replace(self, **changes: Any) -> EstimatorConfig:
         return dataclasses.replace(self, **changes)
 
     @classmethod
-    def from_parameters(cls, values: dict[str, Any]) -> EstimatorConfig:
+    def from_parameters(cls, values: Mapping[str, Any]) -> EstimatorConfig:
         """The estimator node's interpretation of its parameter values (flat, dotted).
 
         The online settings are the top-level parameters named like the fields of
         :class:`OnlineConfig`; ``pipeline.*`` and ``vehicle.*``/``vehicle_file`` the rest.
         Raises ConfigError naming the first invalid parameter.
         """
-        default = cls()
-        online = OnlineConfig(
-            **{
-                f.name: params.number(f.name, values.get(f.name, getattr(default.online, f.name)))
-                for f in dataclasses.fields(OnlineConfig)
-            }
-        )
-        plain = {
-            f.name: values.get(f.name, getattr(default, f.name))
-            for f in dataclasses.fields(cls)
-            if f.name not in ("vehicle", "online", "pipeline")
-        }
-        plain["front_axle_x_m"] = params.number("front_axle_x_m", plain["front_axle_x_m"])
-        params.check_choice("speed_topic_type", plain["speed_topic_type"], SPEED_TOPIC_TYPES)
-        return cls(
-            vehicle=params.vehicle_from_parameters(values),
-            online=online,
-            pipeline=params.build_config("pipeline", default.pipeline, values),
-            **plain,
-        )
+        config: EstimatorConfig = config_from_parameters(cls(), values)
+        return config
 
     def to_json(self) -> str:
         return json.dumps(dataclasses.asdict(self), sort_keys=True)

@@ -17,21 +17,16 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 
+from rozyn_estimator import parameters
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.vehicle import FIELD_UNITS, Vehicle
+from rozyn_estimator.parameters import Param
 
 VEHICLE_FILE_HELP = "vehicle YAML (flat or ROS params); when set it overrides the vehicle.* parameters"
 
 
-def declare(
-    node: Node,
-    name: str,
-    default: Any,
-    description: str,
-    bounds: tuple[float, float] | None = None,
-    read_only: bool = False,
-) -> None:
-    """Declare a parameter with a descriptor (and a range for numbers).
+def descriptor(name: str, default: Any, spec: Param) -> ParameterDescriptor:
+    """The ROS descriptor of a described parameter: description with its unit, the range
+    (when closed) or the choices, read-only flag.
 
     Floating-point parameters accept integers too (``window_s:=60``): they are declared
     with dynamic typing, and the typed configs check and convert the values.
@@ -39,25 +34,35 @@ def declare(
     is_float = isinstance(default, float) or (
         isinstance(default, list) and all(isinstance(x, float) for x in default)
     )
-    d = ParameterDescriptor(
-        name=name, description=description, read_only=read_only, dynamic_typing=is_float
-    )
-    if bounds is not None and isinstance(default, int) and not isinstance(default, bool):
-        d.integer_range = [IntegerRange(from_value=int(bounds[0]), to_value=int(bounds[1]), step=0)]
-    elif bounds is not None and isinstance(default, float):
-        d.floating_point_range = [FloatingPointRange(from_value=bounds[0], to_value=bounds[1], step=0.0)]
-    node.declare_parameter(name, default, d)
+    text = spec.description + (f" [{spec.unit}]" if spec.unit else "")
+    d = ParameterDescriptor(name=name, description=text, read_only=spec.read_only, dynamic_typing=is_float)
+    if spec.choices:
+        d.additional_constraints = f"one of: {', '.join(spec.choices)}"
+    elif spec.low is not None or spec.high is not None:
+        d.additional_constraints = parameters.range_rule(spec)
+    closed = spec.low is not None and spec.high is not None and not spec.open_low
+    if closed and isinstance(default, int) and not isinstance(default, bool):
+        d.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=0)]
+    elif closed and isinstance(default, float):
+        d.floating_point_range = [FloatingPointRange(from_value=spec.low, to_value=spec.high, step=0.0)]
+    return d
 
 
-def declare_vehicle(node: Node) -> list[str]:
-    """Declare ``vehicle_file`` and ``vehicle.<field>`` (Table 5-1 defaults); their names."""
-    declare(node, "vehicle_file", "", VEHICLE_FILE_HELP, read_only=True)
-    defaults = Vehicle()
-    for name, unit in FIELD_UNITS.items():
-        declare(
-            node, f"vehicle.{name}", getattr(defaults, name), f"vehicle {name.replace('_', ' ')} [{unit}]"
-        )
-    return ["vehicle_file", *(f"vehicle.{name}" for name in FIELD_UNITS)]
+def declare_config(node: Node, config: Any) -> list[str]:
+    """Declare every described parameter of a config dataclass (nested ones under their
+    prefixes), with its defaults from ``config``; returns their names."""
+    names = []
+    for flat in parameters.flatten(config):
+        node.declare_parameter(flat.name, flat.value, descriptor(flat.name, flat.value, flat.spec))
+        names.append(flat.name)
+    return names
+
+
+def declare_vehicle_file(node: Node) -> str:
+    """Declare ``vehicle_file`` (the ``vehicle.*`` parameters come with the node's config)."""
+    node.declare_parameter("vehicle_file", "", descriptor("vehicle_file", "", Param(VEHICLE_FILE_HELP,
+                                                                                      read_only=True)))
+    return "vehicle_file"
 
 
 def values_of(node: Node, names: Iterable[str]) -> dict[str, Any]:

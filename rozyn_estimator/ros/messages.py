@@ -26,8 +26,8 @@ from geometry_msgs.msg import InertiaStamped
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.method.pipeline import PARAM_NAMES
-from rozyn_estimator.online.estimator import NS, Health, Update
+from rozyn_estimator.method import PARAM_NAMES
+from rozyn_estimator.online import NS, Health, Update
 
 COVARIANCE_LABEL = ",".join(PARAM_NAMES)
 

@@ -28,6 +28,7 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -41,10 +42,10 @@ from rclpy.parameter import parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
-from rozyn_estimator import parameters as params
 from rozyn_estimator.bag.writer import BagWriter, Qos, QueuedBagWriter
 from rozyn_estimator.errors import BagError, ConfigError
-from rozyn_estimator.online.estimator_config import CUSTOM_DATA_KEY, EstimatorConfig
+from rozyn_estimator.online import CUSTOM_DATA_KEY, EstimatorConfig
+from rozyn_estimator.parameters import build, check, param
 from rozyn_estimator.ros import glue as ros_common
 
 NODE_NAME = "bag_recorder"
@@ -60,28 +61,33 @@ DEFAULT_TOPICS = (
 )
 NS = 1_000_000_000
 
-# name: (default, description, range or None)
-_PARAMS: dict[str, tuple[Any, str, tuple[float, float] | None]] = {
-    "topics": (
-        list(DEFAULT_TOPICS),
-        "topics to record (relative names resolve in this node's namespace)",
-        None,
-    ),
-    "all_topics": (False, "record every topic that has a publisher (hidden topics excepted)", None),
-    "output": ("", "bag directory to create; empty: <bag_root>/<name>-<UTC time>", None),
-    "bag_root": ("bags", "where bags go when output is empty", None),
-    "name": ("run", "first part of the bag's name when output is empty", None),
-    "qos_depth": (1000, "history depth of the subscriptions", (1, 1_000_000)),
-    "discovery_period_s": (0.5, "how often the graph is searched for new topics [s]", (0.01, 60.0)),
-    "flush_period_s": (1.0, "longest time between writes of the pending chunk to disk [s]", (0.01, 3600.0)),
-    "compression": ("zstd", "chunk compression: zstd or none", None),
-    "chunk_size_kib": (1024, "uncompressed size of a chunk [KiB]", (1, 1 << 20)),
-    "estimator_node": (
-        "/estimator_node",
-        "estimator node whose configuration is stored in the bag for rozyn replay; empty: none",
-        None,
-    ),
-}
+
+
+@dataclass(frozen=True)
+class RecorderOptions:
+    """bag_recorder's parameters (all read-only)."""
+
+    topics: tuple[str, ...] = param(DEFAULT_TOPICS, "topics to record (relative names resolve in this node's "
+                                    "namespace)", read_only=True)
+    all_topics: bool = param(False, "record every topic that has a publisher (hidden topics excepted)",
+                             read_only=True)
+    output: str = param("", "bag directory to create; empty: <bag_root>/<name>-<UTC time>", read_only=True)
+    bag_root: str = param("bags", "where bags go when output is empty", read_only=True)
+    name: str = param("run", "first part of the bag's name when output is empty", read_only=True)
+    qos_depth: int = param(1000, "history depth of the subscriptions", low=1, high=1_000_000, read_only=True)
+    discovery_period_s: float = param(0.5, "how often the graph is searched for new topics", unit="s",
+                                      low=0.01, high=60.0, read_only=True)
+    flush_period_s: float = param(1.0, "longest time between writes of the pending chunk to disk", unit="s",
+                                  low=0.01, high=3600.0, read_only=True)
+    compression: str = param("zstd", "chunk compression: zstd or none", choices=("zstd", "none"),
+                             read_only=True)
+    chunk_size_kib: int = param(1024, "uncompressed size of a chunk", unit="KiB", low=1, high=1 << 20,
+                                read_only=True)
+    estimator_node: str = param("/estimator_node", "estimator node whose configuration is stored in the bag "
+                                "for rozyn replay; empty: none", read_only=True)
+
+    def __post_init__(self) -> None:
+        check(self)
 
 
 def bag_path(root: str | Path, name: str) -> Path:
@@ -154,13 +160,11 @@ class BagRecorder(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(self.NAME, **kwargs)
-        for name, (default, text, bounds) in _PARAMS.items():
-            ros_common.declare(self, name, default, text, bounds, read_only=True)
-        p = ros_common.values_of(self, _PARAMS)
-        params.check_choice("compression", p["compression"], ("zstd", "none"))
+        names = ros_common.declare_config(self, RecorderOptions())
+        p: RecorderOptions = build(RecorderOptions(), ros_common.values_of(self, names))
         self._p = p
-        self.path = Path(p["output"]) if p["output"] else bag_path(p["bag_root"], p["name"])
-        self._wanted = {self._resolve(t) for t in p["topics"]}
+        self.path = Path(p.output) if p.output else bag_path(p.bag_root, p.name)
+        self._wanted = {self._resolve(t) for t in p.topics}
         self._recorded: dict[str, str] = {}  # topic -> type
         self._refused: set[str] = set()
         self._last_log_ns = 0
@@ -170,10 +174,10 @@ class BagRecorder(Node):
         self.closed = False
         self.finished = False
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(p["discovery_period_s"], self.discover, clock=steady)
+        self.create_timer(p.discovery_period_s, self.discover, clock=steady)
         self.writer = QueuedBagWriter(  # last: its thread runs until close()
-            BagWriter(self.path, compression=p["compression"], chunk_size=p["chunk_size_kib"] * 1024),
-            flush_period_s=p["flush_period_s"],
+            BagWriter(self.path, compression=p.compression, chunk_size=p.chunk_size_kib * 1024),
+            flush_period_s=p.flush_period_s,
         )
         self.get_logger().info(f"recording to {self.path}")
         self.discover()
@@ -193,7 +197,7 @@ class BagRecorder(Node):
         for topic, types in self.get_topic_names_and_types():
             if topic in self._recorded or topic in self._refused:
                 continue
-            if topic not in self._wanted and not (self._p["all_topics"] and not _hidden(topic)):
+            if topic not in self._wanted and not (self._p.all_topics and not _hidden(topic)):
                 continue
             publishers = self.get_publishers_info_by_topic(topic)
             if publishers:
@@ -222,7 +226,7 @@ class BagRecorder(Node):
             cls,
             topic,
             lambda data, tid=tid: self._on_message(tid, data),
-            adapted_qos(offered, self._p["qos_depth"]),
+            adapted_qos(offered, self._p.qos_depth),
             raw=True,
         )
         self.get_logger().info(f"recording {topic} ({msgtype})")
@@ -235,7 +239,7 @@ class BagRecorder(Node):
     # ------------------------------------------------------- estimator config
     def _fetch_config(self) -> None:
         """Ask the estimator node for its parameters, once it is there (non-blocking)."""
-        target = self._p["estimator_node"]
+        target = self._p.estimator_node
         if not target or self.estimator_config is not None or self._config_pending:
             return
         fqn = target if target.startswith("/") else f"/{target}"
@@ -297,7 +301,7 @@ class BagRecorder(Node):
         counts = self.writer.writer.counts
         total = sum(counts.values())
         self.get_logger().info(f"wrote {self.path}: {total} messages on {len(counts)} topics")
-        if self._p["estimator_node"] and self.estimator_config is None:
+        if self._p.estimator_node and self.estimator_config is None:
             self.get_logger().warning(
                 f"{self._p['estimator_node']} was not seen: the bag holds no estimator configuration"
             )

@@ -13,8 +13,7 @@ from collections.abc import Sequence
 from rclpy.serialization import serialize_message
 
 from rozyn_estimator.bag.writer import Qos, absolute_topic
-from rozyn_estimator.online.estimator import Health, Update
-from rozyn_estimator.online.estimator_config import EstimatorConfig
+from rozyn_estimator.online import EstimatorConfig, Health, Update
 from rozyn_estimator.ros import messages as ros_io
 
 # The node's publishers: (topic, type, offered QoS) — reliable, volatile, depth 10.

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from rozyn_estimator.method.pipeline import METHODS, PipelineConfig, estimate
+from rozyn_estimator.method import METHODS, PipelineConfig, estimate
 from rozyn_estimator.tools.trial import TrialSpec, limit_threads
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.road import Road, RoadSpec

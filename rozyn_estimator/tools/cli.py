@@ -43,7 +43,7 @@ def add_run_options(p: argparse.ArgumentParser, roads: Sequence[str], amplitudes
 
 
 def _add_trial_options(p: argparse.ArgumentParser) -> None:
-    from rozyn_estimator.method.pipeline import METHODS
+    from rozyn_estimator.method import METHODS
     from rozyn_estimator.tools.trial import TRIAL_ROADS
 
     add_run_options(p, TRIAL_ROADS, amplitudes="fixed")

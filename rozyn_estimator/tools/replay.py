@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import dataclasses
 import sys
 import time
 from collections.abc import Sequence
@@ -34,8 +33,16 @@ from rozyn_estimator.bag.cdr import FieldReader
 from rozyn_estimator.bag.reader import BagReader, RawBatch, open_bag
 from rozyn_estimator.bag.writer import BagWriter, absolute_topic
 from rozyn_estimator.errors import BagError, ConfigError
-from rozyn_estimator.online.estimator import LEVEL_NAMES, NS, Job, OnlineEstimator, Update
-from rozyn_estimator.online.estimator_config import CUSTOM_DATA_KEY, SPEED_TOPIC_TYPES, EstimatorConfig
+from rozyn_estimator.online import (
+    CUSTOM_DATA_KEY,
+    LEVEL_NAMES,
+    NS,
+    SPEED_TOPIC_TYPES,
+    EstimatorConfig,
+    OnlineEstimator,
+    SpeedSamples,
+    Update,
+)
 
 HELP = "replay a bag through the online estimator offline: CSV of updates + output bag"
 DESCRIPTION = (
@@ -176,7 +183,7 @@ def resolve_config(reader: BagReader, args: argparse.Namespace) -> tuple[Estimat
 
         changes["vehicle"] = load_vehicle(args.vehicle)
     if getattr(args, "method", None):
-        from rozyn_estimator.method.pipeline import METHODS
+        from rozyn_estimator.method import METHODS
 
         if args.method not in METHODS:
             raise ConfigError(f"--method: must be one of {', '.join(METHODS)}, got {args.method!r}")
@@ -246,7 +253,6 @@ def replay_reader(
     online = OnlineEstimator(
         config.vehicle, config.online, config.pipeline, (config.front_topic, config.rear_topic)
     )
-    feeder = NodeOrderFeeder(online)
     outputs = _Outputs(Path(out_dir), config, reader, write_bag) if out_dir is not None else None
     total = sum(reader.topics[t].count for t in topics)
     bar = _progress(total, progress)
@@ -260,7 +266,7 @@ def replay_reader(
                 for j in np.flatnonzero(batch.topic == i):
                     msgtype = reader.topics[name].msgtype
                     _note_extra(result, reader, name, batch.messages.message(j), msgtype, config)
-            jobs = feeder.feed(chan, stamps, values, a_idx, s_stamps, s_values, s_idx)
+            jobs = online.add_batch(chan, stamps, values, a_idx, SpeedSamples(s_stamps, s_values, s_idx))
             result.accel_messages += a_idx.size
             result.speed_messages += s_idx.size
             t_feed = time.perf_counter()
@@ -337,120 +343,6 @@ def _note_extra(
         result.recorded[msg.header.stamp.sec * NS + msg.header.stamp.nanosec] = values
 
 
-class NodeOrderFeeder:
-    """Feeds an :class:`OnlineEstimator` batch by batch as the node's callbacks would.
-
-    The node adds each message as it arrives and snapshots every update the moment it
-    falls due. Adding a clean batch at once (``add_batch``) and snapshotting after it
-    gives the same windows, since they are cut by stamp, except for speed samples that
-    arrived after the message that made an update due: those are taken out of that
-    update's job. A batch that is not clean (a non-finite value, a stamp not after the
-    last, or a gap: the estimator would drop a sample or reset its window) is fed
-    message by message with a snapshot after each, exactly as the node does.
-    """
-
-    def __init__(self, online: OnlineEstimator) -> None:
-        self.online = online
-        self.last: list[int | None] = [None, None]  # last accepted stamp per channel, as online has it
-
-    def feed(
-        self,
-        chan: np.ndarray,
-        stamps: np.ndarray,
-        values: np.ndarray,
-        order: np.ndarray,
-        speed_stamps: np.ndarray,
-        speed_values: Sequence[float],
-        speed_order: np.ndarray,
-    ) -> list[tuple[Job, int]]:
-        """Accelerations (``chan`` 0 front, 1 rear) and speeds, each with its bag position.
-
-        Returns the due jobs, each with the index (into the acceleration arrays) of the
-        message that made it due.
-        """
-        if not self._clean(chan, stamps, values):
-            return self._one_by_one(chan, stamps, values, order, speed_stamps, speed_values, speed_order)
-        self.online.add_batch(chan, stamps, values)
-        for t, v in zip(speed_stamps.tolist(), speed_values, strict=True):
-            self.online.add_speed(t, v)
-        jobs = [
-            self._as_received(job, chan, stamps, order, speed_stamps, speed_order)
-            for job in self.online.take_due()
-        ]
-        for c in (0, 1):
-            s = stamps[chan == c]
-            if s.size:
-                self.last[c] = int(s[-1])
-        return jobs
-
-    def _clean(self, chan: np.ndarray, stamps: np.ndarray, values: np.ndarray) -> bool:
-        if not np.all(np.isfinite(values)):
-            return False
-        gap = self.online.config.max_gap_s * NS
-        for c in (0, 1):
-            s = stamps[chan == c]
-            steps = np.diff(s) if self.last[c] is None else np.diff(s, prepend=self.last[c])
-            if steps.size and (steps.min() <= 0 or steps.max() >= gap):
-                return False
-        return True
-
-    def _as_received(
-        self,
-        job: Job,
-        chan: np.ndarray,
-        stamps: np.ndarray,
-        order: np.ndarray,
-        speed_stamps: np.ndarray,
-        speed_order: np.ndarray,
-    ) -> tuple[Job, int]:
-        """The job as the node snapshot it: trigger index, late speed samples removed."""
-        reached = []
-        for c in (0, 1):
-            last = self.last[c]
-            if last is not None and last >= job.due_ns:
-                continue  # this channel was there before the batch
-            idx = np.flatnonzero(chan == c)
-            reached.append(int(idx[np.searchsorted(stamps[idx], job.due_ns)]))
-        trigger = max(reached)
-        late = (speed_order > order[trigger]) & (speed_stamps <= job.due_ns)
-        if np.any(late):
-            t, v = job.speed
-            keep = ~np.isin(t, speed_stamps[late])
-            job = dataclasses.replace(job, speed=(t[keep], v[keep]))
-        return job, trigger
-
-    def _one_by_one(
-        self,
-        chan: np.ndarray,
-        stamps: np.ndarray,
-        values: np.ndarray,
-        order: np.ndarray,
-        speed_stamps: np.ndarray,
-        speed_values: Sequence[float],
-        speed_order: np.ndarray,
-    ) -> list[tuple[Job, int]]:
-        online = self.online
-        events = sorted(
-            [(int(p), 0, i) for i, p in enumerate(order)]
-            + [(int(p), 1, i) for i, p in enumerate(speed_order)]
-        )
-        jobs = []
-        for _, kind, i in events:
-            if kind == 1:
-                online.add_speed(int(speed_stamps[i]), speed_values[i])
-                continue
-            c, t = int(chan[i]), int(stamps[i])
-            dropped, resets = sum(online.dropped.values()), online.resets
-            online.add(c, t, float(values[i]))
-            if online.resets != resets:
-                self.last = [None, None]
-                self.last[c] = t
-            elif sum(online.dropped.values()) == dropped:
-                self.last[c] = t
-            jobs += [(job, i) for job in online.take_due()]
-        return jobs
-
-
 # ------------------------------------------------------------------- outputs
 class _Outputs:
     """``updates.csv`` and the output bag of one replay."""
@@ -485,7 +377,7 @@ class _Outputs:
         self._csv.writerow(csv_row(replayed))
         if self._bag is None:
             return
-        for topic, data in self._messages(replayed.update, online.health(), self.config):
+        for topic, data in self._messages(replayed.update, online.report(), self.config):
             self._bag.write(self._ids[topic], replayed.log_ns, data)
 
     def close(self) -> None:

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.method.pipeline import METHODS, PARAM_NAMES, Estimate, PipelineConfig, estimate
+from rozyn_estimator.method import METHODS, PARAM_NAMES, Estimate, PipelineConfig, estimate
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimBlock, SimConfig, Simulation

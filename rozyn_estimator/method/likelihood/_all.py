@@ -84,11 +84,9 @@ from scipy import fft as sfft
 from scipy.optimize import OptimizeResult, minimize
 from scipy.signal import windows
 
-from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.vehicle import Vehicle
 
-SPECTRA = ("cross", "auto")
-COVARIANCES = ("observed", "expected")
 _CORNERS = ("front", "rear")
 _NOISE_AT_ZERO = 1e-5  # a noise floor below this share of its channel's band power is zero
 _MIN_NOISE = 1e-9  # the model's fixed white floor, share of each channel's band power
@@ -96,50 +94,6 @@ _GRID_HZ = (0.8, 1.2, 1.8)  # body frequencies of the coarse start grid
 _NEAR = 10.0  # Newton decrement below which the optimiser uses the sharper Hessian
 _INCOHERENCE_START = 1e-4
 _INCOHERENCE_AT_ZERO = 1e-6
-
-
-@dataclass(frozen=True)
-class LikelihoodConfig:
-    """Settings of the likelihood refinement. Frequencies in Hz."""
-
-    band_hz: tuple[float, float] = (0.5, 15.0)
-    max_band_nyquist: float = 0.6  # the band ends at most at this fraction of fs/2
-    taper: float = 0.2  # share of the window under a cosine taper (see window_spectra)
-    spectra: str = "cross"  # see SPECTRA
-    aliases: int = 1  # aliasing terms a = -A..A of the sampled spectrum
-    estimate_waviness: bool = True  # road shape exponent w as a nuisance parameter
-    road_shape_terms: int = 4  # smooth departures of the road spectrum from a power law
-    estimate_suspension: bool = False  # log scale of k_s and c_s per corner as nuisance
-    estimate_incoherence: bool = False  # a share of the road part incoherent between the channels
-    second_start: bool = True  # the guard: a second start, the lower ℓ wins
-    max_noise_share: float = 0.5  # a channel fitted as more noise than this share of its power: failed
-    covariance: str = "expected"  # see COVARIANCES: the information in the sandwich
-    max_iter: int = 100  # per start
-    tol: float = 1e-4  # converged when the Newton decrement gᵀF⁻¹g is below this
-    noise_start: float = 1e-3  # starts' noise floors, share of each channel's band power
-    block_s: float = 12.0  # time blocks of the empirical score variance (see _block_variances)
-    block_weight: float = 0.5  # the blocks' share in the score variance (0: the model's alone)
-
-    def __post_init__(self) -> None:
-        lo, hi = self.band_hz
-        rules = {
-            "band_hz": (0 < lo < hi, "needs 0 < min < max"),
-            "max_band_nyquist": (0 < self.max_band_nyquist <= 1, "must lie in (0, 1]"),
-            "taper": (0 <= self.taper <= 1, "must lie in [0, 1]"),
-            "spectra": (self.spectra in SPECTRA, f"must be one of {', '.join(SPECTRA)}"),
-            "aliases": (0 <= self.aliases <= 5, "must lie in 0..5"),
-            "road_shape_terms": (0 <= self.road_shape_terms <= 8, "must lie in 0..8"),
-            "covariance": (self.covariance in COVARIANCES, f"must be one of {', '.join(COVARIANCES)}"),
-            "max_iter": (self.max_iter >= 1, "must be >= 1"),
-            "tol": (self.tol > 0, "must be > 0"),
-            "noise_start": (0 < self.noise_start < 1, "must lie in (0, 1)"),
-            "max_noise_share": (0 < self.max_noise_share <= 1, "must lie in (0, 1]"),
-            "block_s": (self.block_s > 0, "must be > 0"),
-            "block_weight": (0 <= self.block_weight <= 1, "must lie in [0, 1]"),
-        }
-        for name, (ok, rule) in rules.items():
-            if not ok:
-                raise ConfigError(f"likelihood.{name}: {rule}, got {getattr(self, name)!r}")
 
 
 @dataclass(frozen=True)

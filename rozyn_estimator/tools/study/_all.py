@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.method.pipeline import METHODS, PARAM_NAMES, Estimate, PipelineConfig
+from rozyn_estimator.method import METHODS, PARAM_NAMES, Estimate, PipelineConfig
 from rozyn_estimator.tools.trial import (
     TrialResult,
     TrialSpec,

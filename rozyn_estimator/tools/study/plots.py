@@ -28,7 +28,7 @@ import numpy as np
 from matplotlib import colors
 from matplotlib.figure import Figure
 
-from rozyn_estimator.method.pipeline import PARAM_NAMES
+from rozyn_estimator.method import PARAM_NAMES
 from rozyn_estimator.tools.study import Cell, CellCorrelations, CellSummary, StudySettings, TrialRow
 
 matplotlib.use("Agg")

@@ -1,0 +1,51 @@
+"""Settings of the likelihood refinement (the ``pipeline.likelihood.*`` parameters)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from rozyn_estimator.parameters import check, param
+
+SPECTRA = ("cross", "auto")
+COVARIANCES = ("observed", "expected")
+
+
+@dataclass(frozen=True)
+class LikelihoodConfig:
+    """Settings of the likelihood refinement. Frequencies in Hz."""
+
+    PARAM_PREFIX: ClassVar[str] = "pipeline.likelihood."
+
+    band_hz: tuple[float, float] = param((0.5, 15.0), "[min, max] frequency band of the fit", unit="Hz",
+                                         low=0.0, open_low=True, length=2)
+    max_band_nyquist: float = param(0.6, "the band ends at most at this share of the Nyquist frequency",
+                                    low=0.0, open_low=True, high=1.0)
+    taper: float = param(0.2, "share of the window under a cosine taper",
+                         low=0.0, high=1.0)
+    spectra: str = param("cross", "cross (front/rear auto- and cross-spectra) or auto (auto-spectra only)",
+                         choices=SPECTRA)
+    aliases: int = param(1, "aliasing terms of the sampled spectrum modelled on each side", low=0, high=5)
+    estimate_waviness: bool = param(True, "fit the road's waviness w (ISO 8608 allows w other than 2)")
+    road_shape_terms: int = param(4, "smooth departures of the road spectrum from a power law", low=0, high=8)
+    estimate_suspension: bool = param(False, "fit the suspension stiffness and damping (per corner) too")
+    estimate_incoherence: bool = param(False, "fit a share of the road part incoherent between the channels")
+    second_start: bool = param(True, "guard against wrong basins: a second start, the lower likelihood wins")
+    max_noise_share: float = param(0.5, "a channel fitted as more noise than this share of its power fails",
+                                   low=0.0, open_low=True, high=1.0)
+    covariance: str = param("expected", "information in the covariance sandwich: expected or observed",
+                            choices=COVARIANCES)
+    max_iter: int = param(100, "optimiser iterations per start", low=1)
+    tol: float = param(1e-4, "convergence: Newton decrement below this", low=0.0, open_low=True)
+    noise_start: float = param(1e-3, "the starts' noise floors, share of each channel's band power",
+                               low=0.0, open_low=True, high=1.0)
+    block_s: float = param(12.0, "time blocks of the covariance's empirical score variance", unit="s",
+                           low=0.0, open_low=True)
+    block_weight: float = param(0.5, "the time blocks' share in the score variance, 0..1 (0: the model's "
+                                "alone)", low=0.0, high=1.0)
+
+    def __post_init__(self) -> None:
+        check(self, (
+            ("band_hz", lambda c: c.band_hz[0] < c.band_hz[1], "needs 0 < min < max"),
+            ("noise_start", lambda c: c.noise_start < 1.0, "must lie in (0, 1)"),
+        ))

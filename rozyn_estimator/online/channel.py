@@ -1,0 +1,82 @@
+"""The samples of one sensor as the online estimator holds them (ROS-free)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+_PERIOD_STEPS = 20  # steps between stamps that set a sensor's period
+
+
+class Channel:
+    """Samples of one sensor: recent appends in lists (cheap per message), the rest in arrays.
+
+    ``count``, ``period_ns`` and ``missing`` survive :meth:`clear` (a window reset).
+    """
+
+    def __init__(self) -> None:
+        self.count = 0  # samples taken in, across resets
+        self.period_ns: int | None = None  # the sensor's sample period, from its first steps
+        self.missing = 0  # samples missing between stamps (lost before reaching us)
+        self._first_steps: list[int] = []
+        self.clear()
+
+    def clear(self) -> None:
+        """Forget the samples (a reset); the counts and the period stay."""
+        self.stamps = np.zeros(0, dtype=np.int64)
+        self.values = np.zeros(0)
+        self.new_stamps: list[int] = []
+        self.new_values: list[float] = []
+        self.last_ns: int | None = None
+
+    def append(self, stamp_ns: int, value: float) -> None:
+        self.last_ns = stamp_ns
+        self.new_stamps.append(stamp_ns)
+        self.new_values.append(value)
+        self.count += 1
+
+    def extend(self, stamps_ns: np.ndarray, values: np.ndarray) -> None:
+        """Samples known to be in order after the last (a clean batch)."""
+        self.consolidate()
+        self.stamps = np.concatenate([self.stamps, stamps_ns])
+        self.values = np.concatenate([self.values, values])
+        self.last_ns = int(stamps_ns[-1])
+        self.count += int(stamps_ns.size)
+
+    def note_steps(self, steps: np.ndarray | list[int]) -> None:
+        """Learn the period from the first steps between stamps, then count missing samples."""
+        steps = np.asarray(steps, dtype=np.int64)
+        if self.period_ns is None:
+            take = _PERIOD_STEPS - len(self._first_steps)
+            self._first_steps += steps[:take].tolist()
+            steps = steps[take:]
+            if len(self._first_steps) < _PERIOD_STEPS:
+                return
+            self.period_ns = int(np.median(self._first_steps))
+        late = steps[steps > 1.5 * self.period_ns]
+        if late.size:
+            self.missing += int(np.sum(np.round(late / self.period_ns) - 1))
+
+    def consolidate(self) -> None:
+        if self.new_stamps:
+            self.stamps = np.concatenate([self.stamps, np.asarray(self.new_stamps, dtype=np.int64)])
+            self.values = np.concatenate([self.values, np.asarray(self.new_values, dtype=float)])
+            self.new_stamps.clear()
+            self.new_values.clear()
+
+    def first_ns(self) -> int:
+        self.consolidate()
+        return int(self.stamps[0])
+
+    def trim(self, keep_from_ns: int) -> None:
+        self.consolidate()
+        start = int(np.searchsorted(self.stamps, keep_from_ns, side="left"))
+        if start:
+            self.stamps = self.stamps[start:]
+            self.values = self.values[start:]
+
+    def window(self, lo_ns: int, hi_ns: int) -> tuple[np.ndarray, np.ndarray]:
+        """Copies of the samples with ``lo_ns < stamp <= hi_ns``."""
+        self.consolidate()
+        a = int(np.searchsorted(self.stamps, lo_ns, side="right"))
+        b = int(np.searchsorted(self.stamps, hi_ns, side="right"))
+        return self.stamps[a:b].copy(), self.values[a:b].copy()
