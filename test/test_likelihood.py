@@ -282,7 +282,7 @@ def test_score_series_sums_to_the_score(window):
     """The time-block variance rests on Parseval: ψ(t) summed over the samples is the
     score's data term Σ_k tr(A_k I_k), tapered or not, and ψ is local (a block's sum is
     far below the sum of its |ψ|)."""
-    from rozyn_estimator.method.likelihood import _score_series
+    from rozyn_estimator.method.likelihood.covariance import _score_series
 
     accel, _ = window
     for taper in (0.0, 0.2):

@@ -1,0 +1,200 @@
+"""The covariance of the fitted (m, I, lf): the sandwich (:func:`sandwich_covariance`) and
+the score's variance measured from the data's time blocks (:func:`_block_variances`).
+
+Covariance: the sandwich ``H⁻¹ J H⁻¹`` mapped to (m, I, lf), with ``H`` the Fisher
+information (``covariance="expected"``, free) or the observed information (the Hessian of
+ℓ by forward differences of the analytic gradient, ``"observed"``), and ``J`` the
+covariance of the score under the fitted model: with no taper and both cross-spectra that
+is the Fisher information itself; it adds what the taper correlates (neighbouring
+ordinates) and, for the auto-spectra fit, the channels' correlation that fit ignores. A
+noise floor run to zero (noise-free data) is held fixed. That ``J`` assumes a stationary
+road; on a road whose roughness changes along the way (the Laplace road) the estimate
+varies more. So the score's variance is also measured from the data: the score is a
+quadratic form of the samples, split over ~12 s time blocks, whose spread (batch means,
+the road intensity's drift regressed out) estimates it whatever the road; the published
+``J`` is the mean of the model's and the blocks' (``block_weight``, see :func:`sandwich_covariance`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import fft as sfft
+from scipy.signal import windows
+
+from rozyn_estimator.method.likelihood.config import LikelihoodConfig
+from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
+from rozyn_estimator.method.likelihood.objective import WhittleObjective, inv2
+
+_NOISE_AT_ZERO = 1e-5  # a noise floor below this share of its channel's band power is zero
+_INCOHERENCE_AT_ZERO = 1e-6
+
+
+class CovarianceError(Exception):
+    """The information at the optimum gives no covariance (the fit fails)."""
+
+
+def sandwich_covariance(objective: WhittleObjective, model: HalfCarSpectrum, theta: np.ndarray,
+                        cfg: LikelihoodConfig, accel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(3, 3) covariance of (m, I, lf) from the information at the optimum, and the factors
+    the time blocks applied to the model sandwich's variances.
+
+    The score's variance along (m, I, lf) is the weighted mean of two estimates,
+    ``(1 - ω) J_model + ω J_blocks`` (``ω = cfg.block_weight``), applied to the sandwich as
+    a factor per parameter (``cov ← D cov D``, ``D = diag(√factor)``: the correlations stay).
+    ``J_model`` is exact for a stationary Gaussian road and has no sampling noise; the
+    blocks' (:func:`_block_variances`) is unbiased on any road, the non-stationary ones
+    included, but with 8-10 blocks per window it has only 6-8 degrees of freedom.
+    Used alone it would make the intervals Student-t-like (under-covering everywhere);
+    ``ω = 1/2`` counts the model as much as the blocks: on stationary roads the published
+    variance stays unbiased with half that noise, and a non-stationary road's excess is
+    carried half way. A compromise by construction, not a fit to any seeds.
+    """
+    info = objective.observed_information(theta) if cfg.covariance == "observed" else objective.fisher(theta)
+    # A noise floor far below its channel's power sits at its boundary (zero): the data
+    # hold no information on it, so the fit is conditioned on it.
+    keep = np.ones(theta.size, dtype=bool)
+    keep[4:6] = np.exp(theta[4:6]) > _NOISE_AT_ZERO * objective.band_power
+    if "ln_incoherence" in model.index:
+        # Likewise the incoherent share when the data do not resolve it (noise dominates):
+        # near its boundary the information's curvature misstates the other parameters'.
+        k = model.index["ln_incoherence"]
+        keep[k] = math.exp(theta[k]) > _INCOHERENCE_AT_ZERO
+        if keep[k]:
+            sub = info[np.ix_(keep, keep)]
+            at = int(np.sum(keep[:k]))
+            with np.errstate(all="ignore"):
+                keep[k] = bool(np.linalg.pinv(sub)[at, at] < 1.0)  # std of ln(share) < 1
+    info = info[np.ix_(keep, keep)]
+    try:
+        eig = np.linalg.eigvalsh(info)
+        if not (np.all(np.isfinite(eig)) and eig.min() > 1e-12 * eig.max()):
+            raise CovarianceError("likelihood fit: the information matrix is not positive definite")
+        inv = np.linalg.inv(info)
+    except np.linalg.LinAlgError:
+        raise CovarianceError("likelihood fit: singular information matrix") from None
+    # Sandwich H⁻¹ J H⁻¹, projected on (m, I, lf) first: B = d(m, I, lf)/dθ H⁻¹.
+    combos = np.zeros((3, theta.size))
+    combos[:, keep] = model.physical_jacobian(theta)[:, keep] @ inv
+    cov = objective.score_covariance(theta, combos)
+    cov = 0.5 * (cov + cov.T)
+    factors = np.ones(3)
+    if cfg.block_weight > 0:
+        blocks = _block_variances(objective, theta, combos, accel, cfg.block_s, cfg.taper)
+        if blocks is not None and np.all(np.diag(cov) > 0):
+            factors = 1.0 + cfg.block_weight * (blocks / np.diag(cov) - 1.0)
+            scale = np.sqrt(factors)
+            cov = scale[:, None] * cov * scale[None, :]
+    return cov, factors
+
+
+_MIN_BLOCKS = 6  # fewer time blocks than this: too few for a variance (the model's J alone)
+
+
+def _block_variances(objective: WhittleObjective, theta: np.ndarray, combos: np.ndarray,
+                     accel: np.ndarray, block_s: float, taper: float) -> np.ndarray | None:
+    """Variances of ``combos ∇ℓ`` from the score's time blocks, or None (too few blocks).
+
+    Why: the model's J assumes a stationary road. A road whose roughness changes along
+    the way (the Laplace road: its intensity jumps every 100 m) makes the estimate vary
+    more than that (conditionally on the road's envelope, and through the envelope's own
+    smearing of the spectrum), and no stationary model can say by how much. The score
+    itself can: ``Σ_k tr(A_k I_k)`` with ``A_k = S⁻¹ (combos ∂S) S⁻¹`` is a quadratic form of
+    the (band-limited, tapered) samples, ``Σ_t ψ(t)`` with ``ψ(t) = ỹ_t · ẽ_t / (2 fs)``,
+    ``ẽ`` the samples filtered by ``A`` (Parseval). Summed over time blocks ``G_b`` it is a
+    sum of nearly independent terms whose spread estimates its variance whatever the
+    road (batch means: robust to heteroscedastic, non-stationary data). For the efficient
+    directions ``combos = d(m, I, lf)/dθ H⁻¹`` (road intensity and noise floors profiled
+    out) a block's expectation is zero whatever its local road intensity:
+    ``Σ_k tr(A_k S_road,k) = Σ_k tr(A_k N) = 0``.
+
+    Three details make it work:
+
+    - Blocks of ``block_s`` with raised-cosine edges as long as a block (a smooth
+      partition of unity): ``ψ`` is local only beyond the filter's span; a sharp edge
+      cuts through pairs of samples whose terms cancel only together (sharp 20 s blocks
+      overstate the variance 3-10x).
+    - The drift term: the response lags the road, so where the road's intensity ``a²``
+      changes, ``ψ``'s local mean is ``c ∂a²/∂t`` (zero in total, but a block picks up
+      ``c`` times the change of ``a²`` between its edges, far above its noise on a
+      Laplace road). It is regressed out on ``D_b = -Σ_t v_b'(t) P(t)``, ``P`` the samples'
+      local power (1 s moving average), and costs one degree of freedom.
+    - The estimate at θ̂: the blocks' sum is zero (the fit's own score), which costs
+      another degree of freedom: ``Var = B / (B - 2) Σ_b G_b²``.
+
+    With ``B`` = 8-10 blocks (100-120 s windows) the estimate has only 6-8 degrees of
+    freedom (±50-60 % on a variance): see :func:`sandwich_covariance` for how it is combined with
+    the model's J. Blocks much shorter than ``block_s`` = 12 s overstate the variance even
+    on Gaussian roads (the edges still cut the score's filter: 2x at 5 s, +10-40 % at
+    10 s at 30-70 km/h); longer ones leave too few.
+    """
+    spectra = objective.spectra
+    n, fs = spectra.n_samples, spectra.fs_hz
+    n_blocks = int(n / fs // block_s)
+    if spectra.dft is None or n_blocks < _MIN_BLOCKS or accel.shape[0] != n:
+        return None
+    psi = _score_series(objective, theta, combos)
+    weights = _partition(n, n_blocks)
+    w2 = windows.tukey(n, taper) ** 2 if taper > 0 else np.ones(n)
+    share = weights @ (w2 / w2.sum())  # each block's share of the score's expectation
+    G = weights @ psi.T  # (B, 3)
+    G -= share[:, None] * G.sum(axis=0)
+    y = accel - accel.mean(axis=0)
+    power = _moving_average(np.einsum("ta,ta->t", y, y), max(1, round(fs)))
+    drift = -(np.gradient(weights, axis=1) @ power)
+    drift -= share * drift.sum()
+    dof = n_blocks - 1
+    if drift @ drift > 0:
+        G -= np.outer(drift, (drift @ G) / (drift @ drift))
+        dof -= 1
+    return n_blocks / dof * np.einsum("bq,bq->q", G, G)
+
+
+def _score_series(objective: WhittleObjective, theta: np.ndarray, combos: np.ndarray) -> np.ndarray:
+    """(q, n) ψ(t): the score's data term ``Σ_k tr(A_k I_k)`` along each of ``combos`` as a
+    sum over the samples, ``A_k = S⁻¹ (combos ∂S) S⁻¹`` (restricted as the fit's).
+
+    ``ψ(t) = ỹ_t · ẽ_t / (2 fs)`` with ``ỹ`` the tapered samples and ``ẽ`` the samples filtered
+    by ``A``, both band-limited (inverse FFTs of ``d_k`` and ``A_k d_k`` on the band): by
+    Parseval ``Σ_t ψ(t) = Re Σ_k d_kᴴ A_k d_k / (n fs)``.
+    """
+    spectra = objective.spectra
+    n, fs, d = spectra.n_samples, spectra.fs_hz, spectra.dft
+    if d is None:
+        raise ValueError("the score's time series needs the window's DFT (Spectra.dft)")
+    S, dS = objective.model.spectrum(theta)
+    S, dS = objective.restrict(S), objective.restrict(dS)
+    inv = inv2(S)[0]
+    A = inv[None] @ np.tensordot(combos, dS, axes=1) @ inv[None]  # (q, k, 2, 2)
+    k0, k = spectra.first_bin, d.shape[0]
+    full = np.zeros((1 + combos.shape[0], n // 2 + 1, 2), dtype=complex)  # ỹ and the filtered ẽ
+    full[0, k0: k0 + k] = d
+    full[1:, k0: k0 + k] = np.einsum("qkab,kb->qka", A, d)
+    series = sfft.irfft(full, n=n, axis=1)
+    return np.einsum("ta,qta->qt", series[0], series[1:]) / (2.0 * fs)
+
+
+def _partition(n: int, n_blocks: int) -> np.ndarray:
+    """(B, n) a smooth partition of unity: B blocks, each rising and falling over a block's
+    length with raised cosines (each sample shared by at most two neighbouring blocks)."""
+    length = n / n_blocks
+    t = (np.arange(n) + 0.5) / length - 0.5  # block centres at 0, 1, ..
+    out = np.zeros((n_blocks, n))
+    for b in range(n_blocks):
+        x = np.clip(t - b, -1.0, 1.0)
+        v = np.cos(0.5 * np.pi * x) ** 2
+        if b == 0:
+            v[t < 0] = 1.0
+        if b == n_blocks - 1:
+            v[t > n_blocks - 1] = 1.0
+        out[b] = v
+    return out / out.sum(axis=0)
+
+
+def _moving_average(x: np.ndarray, width: int) -> np.ndarray:
+    """Centred moving average over ``width`` samples (shorter at the ends)."""
+    c = np.r_[0.0, np.cumsum(x)]
+    lo = np.clip(np.arange(x.size) - width // 2, 0, x.size)
+    hi = np.clip(lo + width, 0, x.size)
+    return (c[hi] - c[lo]) / (hi - lo)

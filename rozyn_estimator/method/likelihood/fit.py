@@ -1,0 +1,309 @@
+"""The multi-start fit: :func:`refine` (a window's maximum-likelihood (m, I, lf) and its
+covariance, as a :class:`Refinement`), the starts, and the checks that refuse an optimum
+that is not credible.
+
+Rozyn's pipeline (``pipeline.py``) condenses the data into two modes and fits the
+inertia to them; this stage fits the whole 4-DOF half car to the whole front/rear
+spectral matrix instead, started from Rozyn's estimate.
+
+Fit. The negative Whittle log-likelihood ℓ(θ) of the window's periodogram matrices
+(:mod:`rozyn_estimator.method.likelihood.objective`) at the Fourier frequencies of the band
+(default 0.5-15 Hz, and at most 60 % of the Nyquist frequency)
+is minimised over ``θ = [ln m, ln I, logit(lf/L), ln σ², ln n_f, ln n_r, w, c_2..c_5]``
+(optionally ``ln ε`` and the log scale factors of the suspension stiffness and damping as
+well) by scipy's
+trust-region Newton method with the analytic gradient. Its Hessian is the Fisher
+information far from the optimum and, near it, the Fisher information with the exact
+rows of ``σ²`` and the noise floors (their second derivatives are known in closed form);
+the fit stops when the Newton decrement ``gᵀF⁻¹g`` is below ``tol``. ``spectra="auto"``
+uses the auto-spectra only (for comparison).
+
+Starts and the guard against wrong basins (a basin that explains one channel as noise
+exists): cold, the fit runs from the given start (Rozyn's estimate) and from the best
+point of a coarse grid of body frequencies and CoG positions, and keeps the lower ℓ;
+warm, from the previous window's optimum, and from the given start too when the result
+disagrees with it by more than 6 of its standard deviations. A result that still
+explains a channel as mostly noise is refused.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import OptimizeResult, minimize
+
+from rozyn_estimator.method.likelihood.config import LikelihoodConfig
+from rozyn_estimator.method.likelihood.covariance import CovarianceError, sandwich_covariance
+from rozyn_estimator.method.likelihood.model import CORNERS, HalfCarSpectrum
+from rozyn_estimator.method.likelihood.objective import WhittleObjective
+from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, window_spectra
+from rozyn_estimator.vehicle import Vehicle
+
+_MIN_NOISE = 1e-9  # the model's fixed white floor, share of each channel's band power
+_GRID_HZ = (0.8, 1.2, 1.8)  # body frequencies of the coarse start grid
+
+
+@dataclass(frozen=True)
+class Refinement:
+    """Result of the likelihood refinement. ``params``/``covariance`` None unless ok."""
+
+    status: str  # "ok" | "failed"
+    reason: str = ""
+    params: np.ndarray | None = None  # (m [kg], I [kg m²], lf [m])
+    covariance: np.ndarray | None = None  # (3, 3)
+    theta: np.ndarray | None = None  # all fitted parameters (names in ``names``)
+    names: tuple[str, ...] = ()
+    neg_log_likelihood: float = math.nan  # ℓ at the optimum (constant terms dropped)
+    iterations: int = 0
+    starts: int = 0
+    band_hz: tuple[float, float] = (math.nan, math.nan)
+    noise_std_mps2: tuple[float, float] = (math.nan, math.nan)  # fitted white sensor noise
+    waviness: float = 2.0
+    suspension_scale: tuple[float, ...] = ()  # fitted (k_s f, k_s r, c_s f, c_s r) / nominal
+    variance_factors: tuple[float, ...] = ()  # (m, I, lf) variances / the model sandwich's
+    elapsed_ms: float = 0.0
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    def to_dict(self) -> dict[str, object]:
+        out: dict[str, object] = {
+            "status": self.status, "reason": self.reason,
+            "params": None if self.params is None else self.params.tolist(),
+            "neg_log_likelihood": self.neg_log_likelihood, "iterations": self.iterations,
+            "starts": self.starts, "band_hz": list(self.band_hz),
+            "noise_std_mps2": list(self.noise_std_mps2), "waviness": self.waviness,
+            "elapsed_ms": self.elapsed_ms,
+        }
+        if self.suspension_scale:
+            out["suspension_scale"] = list(self.suspension_scale)
+        return out
+
+
+def refine(
+    accel_mps2: np.ndarray,
+    fs_hz: float,
+    vehicle: Vehicle,
+    start: np.ndarray | None,
+    speed_mps: float | np.ndarray,
+    config: LikelihoodConfig | None = None,
+    warm: Refinement | np.ndarray | None = None,
+    start_std: np.ndarray | None = None,
+) -> Refinement:
+    """Maximum-likelihood (m, I, lf) from a window, started from ``start``.
+
+    Cold (no ``warm``), the fit runs from ``start`` and from the best point of a coarse
+    grid, and keeps the lower ℓ. Warm, it runs from the previous optimum, and from
+    ``start`` as well only if the result disagrees with it by more than 6 ``start_std``.
+
+    Args:
+        accel_mps2: (n, 2) front/rear vertical accelerations on a uniform grid, finite.
+        fs_hz: sample rate [Hz].
+        vehicle: the known suspension, tyres, unsprung masses, geometry and sensors.
+        start: (3,) start (m [kg], I [kg m²], lf [m]), e.g. Rozyn's estimate; None (or
+            an unphysical one) for the best point of a coarse grid instead.
+        speed_mps: the speed [m/s], a number or one per sample.
+        config: settings.
+        warm: the previous window's refinement (its full θ, nuisance parameters
+            included, is the first start) or its (m, I, lf).
+        start_std: (3,) standard deviations of ``start`` (the warm path's guard).
+
+    Returns:
+        A :class:`Refinement`, ``failed`` with a reason when no optimum is credible.
+    """
+    cfg = config or LikelihoodConfig()
+    started = time.perf_counter()
+    try:
+        start = None if start is None else np.asarray(start, dtype=float)
+        result = _refine(np.asarray(accel_mps2, dtype=float), float(fs_hz), vehicle, start, start_std,
+                         speed_mps, cfg, warm)
+    except _FitError as exc:
+        result = Refinement(status="failed", reason=str(exc))
+    except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
+        result = Refinement(status="failed", reason=f"likelihood fit: {exc}")
+    return _with_time(result, started)
+
+
+def _with_time(r: Refinement, started: float) -> Refinement:
+    return dataclasses.replace(r, elapsed_ms=(time.perf_counter() - started) * 1e3)
+
+
+class _FitError(Exception):
+    """The optimum found is not credible (becomes a failed status)."""
+
+
+def _refine(
+    y: np.ndarray, fs: float, vehicle: Vehicle, start: np.ndarray | None, start_std: np.ndarray | None,
+    speed: float | np.ndarray, cfg: LikelihoodConfig, warm: Refinement | np.ndarray | None,
+) -> Refinement:
+    band = (cfg.band_hz[0], min(cfg.band_hz[1], cfg.max_band_nyquist * fs / 2.0))
+    v = np.atleast_1d(np.asarray(speed, dtype=float))
+    if not (np.all(np.isfinite(v)) and np.all(v > 0)):
+        return Refinement(status="failed", reason="likelihood fit needs a positive speed")
+    if v.size not in (1, y.shape[0]):
+        return Refinement(status="failed", reason=f"speed: expected 1 or {y.shape[0]} values, got {v.size}")
+    L = vehicle.wheelbase_m
+    spectra = window_spectra(y, fs, band, cfg.taper)
+    if spectra.freq_hz.size < 50:
+        return Refinement(status="failed", reason=f"too few frequencies in {band[0]:g}-{band[1]:g} Hz")
+    model = HalfCarSpectrum(vehicle, spectra.freq_hz, fs, v if v.size > 1 else float(v[0]), cfg.aliases,
+                            f_ref_hz=math.sqrt(band[0] * band[1]),
+                            estimate_waviness=cfg.estimate_waviness,
+                            estimate_suspension=cfg.estimate_suspension,
+                            min_noise_psd=tuple(_MIN_NOISE * band_power(spectra)),
+                            road_shape_terms=cfg.road_shape_terms,
+                            estimate_incoherence=cfg.estimate_incoherence,
+                            window_weights=spectra.window_weights)
+    objective = WhittleObjective(model, spectra, cfg.spectra)
+    fits = _Fits(objective, cfg)
+    given = start if start is not None and _physical(start, L) else None  # a usable start
+    warm_theta = None
+    if isinstance(warm, Refinement) and warm.theta is not None and warm.theta.size == model.n_params:
+        warm_theta = warm.theta
+    elif isinstance(warm, np.ndarray) and _physical(warm, L):
+        warm_theta = _start_theta(model, spectra, warm, cfg.noise_start)
+    if warm_theta is not None:
+        # Warm: the previous optimum. The guard (the given start, or the grid's best) runs
+        # only when the result disagrees with the start beyond 6 of its standard deviations
+        # (Rozyn's are at times optimistic: a wrong basin lies much further away).
+        fits.run(warm_theta)
+        first = fits.best  # None: no finite likelihood, which agrees with nothing
+        if cfg.second_start and (first is None or not _agrees(model.physical(first.x), start, start_std)):
+            fits.run(_start_theta(model, spectra, given, cfg.noise_start) if given is not None else
+                     _grid_starts(objective, spectra, vehicle, cfg.noise_start)[0])
+    else:
+        # Cold: the given start and the best point of a coarse grid (or the grid's two best).
+        starts = [_start_theta(model, spectra, given, cfg.noise_start)] if given is not None else []
+        if cfg.second_start or given is None:
+            starts += _grid_starts(objective, spectra, vehicle, cfg.noise_start)
+        for th0 in starts[: 2 if cfg.second_start else 1]:
+            fits.run(th0)
+    best, iterations = fits.best, fits.iterations
+    if best is None or not np.isfinite(best.fun):
+        return Refinement(status="failed", reason="likelihood fit: no start gave a finite likelihood")
+    theta = best.x
+    params = model.physical(theta)
+    notes: list[str] = []
+    if not fits.converged:
+        notes.append(f"likelihood fit: not converged in {cfg.max_iter} iterations")
+    try:
+        _check_noise(theta, objective, cfg)
+        cov, factors = sandwich_covariance(objective, model, theta, cfg, y)
+        _check(params, cov, L)
+    except (_FitError, CovarianceError) as exc:
+        return Refinement(status="failed", reason=str(exc), params=None, theta=theta,
+                          names=tuple(model.names), iterations=iterations, starts=fits.starts)
+    noise = np.sqrt(np.exp(theta[4:6]) * fs)  # two-sided white PSD n -> std sqrt(n fs)
+    return Refinement(
+        status="ok", params=params, covariance=cov, theta=theta, names=tuple(model.names),
+        neg_log_likelihood=float(best.fun), iterations=iterations, starts=fits.starts, band_hz=band,
+        noise_std_mps2=(float(noise[0]), float(noise[1])),
+        waviness=float(theta[model.index["waviness"]]) if cfg.estimate_waviness else 2.0,
+        suspension_scale=tuple(np.exp(theta[-4:]).tolist()) if cfg.estimate_suspension else (),
+        variance_factors=tuple(factors.tolist()), notes=tuple(notes),
+    )
+
+
+def _grid_starts(
+    objective: WhittleObjective, spectra: Spectra, vehicle: Vehicle, noise_share: float
+) -> list[np.ndarray]:
+    """θ at the two best points of a coarse grid: body heave and pitch frequencies 0.8-1.8 Hz
+    on the known static stiffness (eq 2-21), the CoG at 30-60 % of the wheelbase."""
+    v = vehicle
+    corners = ((v.suspension_stiffness_front_npm, v.tyre_stiffness_front_npm),
+               (v.suspension_stiffness_rear_npm, v.tyre_stiffness_rear_npm))
+    k = [ks * kt / (ks + kt) for ks, kt in corners]
+    L = v.wheelbase_m
+    scored: list[tuple[float, int, np.ndarray]] = []
+    for lf in (0.3 * L, 0.45 * L, 0.6 * L):
+        for heave_hz in _GRID_HZ:
+            for pitch_hz in _GRID_HZ:
+                m = (k[0] + k[1]) / (2 * math.pi * heave_hz) ** 2
+                inertia = (k[0] * lf**2 + k[1] * (L - lf) ** 2) / (2 * math.pi * pitch_hz) ** 2
+                theta, S = _start(objective.model, spectra, np.array([m, inertia, lf]), noise_share)
+                scored.append((objective.nll(S), len(scored), theta))
+    scored = sorted(x for x in scored if math.isfinite(x[0]))
+    if not scored:
+        raise _FitError("likelihood fit: no grid point gave a finite likelihood")
+    return [theta for _, _, theta in scored[:2]]
+
+
+def _check_noise(theta: np.ndarray, objective: WhittleObjective, cfg: LikelihoodConfig) -> None:
+    share = np.exp(theta[4:6]) / objective.band_power
+    for name, value in zip(CORNERS, share, strict=True):
+        if value > cfg.max_noise_share:
+            raise _FitError(
+                f"likelihood fit explains the {name} channel as mostly noise ({value:.0%} of its power "
+                f"in the band): a wrong basin or a faulty sensor"
+            )
+
+
+class _Fits:
+    """Trust-region Newton fits from several starts; keeps the lowest ℓ."""
+
+    def __init__(self, objective: WhittleObjective, cfg: LikelihoodConfig) -> None:
+        self.objective, self.cfg = objective, cfg
+        self.best: OptimizeResult | None = None
+        self.iterations = self.starts = 0
+        self.converged = False
+
+    def run(self, theta0: np.ndarray) -> None:
+        def stop_when_converged(intermediate_result: OptimizeResult) -> None:
+            if self.objective.decrement(intermediate_result.x) < self.cfg.tol:
+                raise StopIteration
+
+        res = minimize(self.objective.fun, theta0, jac=self.objective.jac, hess=self.objective.hess,
+                       method="trust-exact", callback=stop_when_converged,
+                       options={"gtol": 1e-12, "maxiter": self.cfg.max_iter})
+        self.iterations += int(res.nit)
+        self.starts += 1
+        if np.isfinite(res.fun) and (self.best is None or res.fun < self.best.fun):
+            self.best = res
+            self.converged = self.objective.decrement(res.x) < self.cfg.tol
+
+
+def _agrees(params: np.ndarray, start: np.ndarray | None, start_std: np.ndarray | None) -> bool:
+    """``params`` within 6 standard deviations of the start in every parameter."""
+    if start is None or start_std is None or not np.all(np.isfinite(start_std)):
+        return False
+    return bool(np.all(np.abs(params - start) <= 6.0 * start_std))
+
+
+def _physical(params: np.ndarray, wheelbase_m: float) -> bool:
+    """(m, I, lf) finite, positive and with the CoG between the axles."""
+    p = np.asarray(params, dtype=float)
+    return bool(p.shape == (3,) and np.all(np.isfinite(p)) and min(p[0], p[1]) > 0 and 0 < p[2] < wheelbase_m)
+
+
+def _start_theta(
+    model: HalfCarSpectrum, spectra: Spectra, params: np.ndarray, noise_share: float
+) -> np.ndarray:
+    """θ at ``params`` with the road intensity matched to the band's power."""
+    return _start(model, spectra, params, noise_share)[0]
+
+
+def _start(
+    model: HalfCarSpectrum, spectra: Spectra, params: np.ndarray, noise_share: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(θ, S at θ) at ``params``, the road intensity matched to the band's power."""
+    power = band_power(spectra)
+    theta = model.theta(params, 1.0, noise_share * power)
+    S, _ = model.spectrum(theta, derivatives=False)
+    floor = np.diag(noise_share * power + model.min_noise_psd)
+    road = np.einsum("kaa->", S - floor).real / spectra.freq_hz.size
+    scale = max(float(np.sum(power)) / road, 1e-300)
+    theta[3] = math.log(scale)
+    return theta, scale * (S - floor) + floor
+
+
+def _check(params: np.ndarray, cov: np.ndarray, L: float) -> None:
+    if not np.all(np.isfinite(params)) or not np.all(np.isfinite(cov)):
+        raise _FitError("likelihood fit: not finite")
+    if not 1e-3 * L < params[2] < (1 - 1e-3) * L:
+        raise _FitError(f"likelihood fit: CoG at the wheelbase's end (lf = {params[2]:.4g} m)")

@@ -1,0 +1,301 @@
+"""The half car's spectral model: :func:`delay_characteristic` (the wheelbase delay over a
+speed profile) and :class:`HalfCarSpectrum` (the 2x2 spectral matrix of the front/rear
+accelerations on a frequency grid, its parameters θ and its derivatives dS/dθ).
+
+Model (all in the frequency domain, vectorised over the grid). Each corner is the
+suspension ``z_s = k_s + iω c_s`` on the wheel ``m_t`` on the tyre ``z_t = k_t + iω c_t``
+(thesis eqs 3-4 to 3-7, chapter 3). Condensing the wheel exactly, the corner acts on the
+body at its axle point ``x_b`` with
+
+    F = -Z(ω) x_b + T(ω) u,   Z = z_s (z_t - ω² m_t) / d,   T = z_s z_t / d,
+    d = z_s + z_t - ω² m_t,
+
+``u`` the road height under the wheel. The body, in the axle coordinates
+``x_b = [x_sf, x_sr]`` (eqs 3-8, 3-9), has the mass matrix (from its kinetic energy)
+
+    M_ax = [[m lr² + I, m lf lr - I], [m lf lr - I, m lf² + I]] / L²,
+
+so ``(diag Z - ω² M_ax) x_b = diag(T) u`` (the 2-DOF equivalent of eqs 2-23 to 2-30 with
+the exact dynamic condensation). A sensor at ``x`` from the front axle reads
+``-ω² [(1 - x/L), x/L] x_b``. One road drives both wheels: the rear sees the front's
+road ``τ = L / v`` later, and the road *velocity* is white for ISO 8608 waviness
+``w = 2`` (spectrum ``∝ f^(2-w)`` in general). Per unit road velocity at the front wheel
+the accelerations are ``G(ω) [1, e^(-iωτ)]ᵀ`` with ``G = iω P (diag Z - ω² M_ax)⁻¹ diag T``,
+and the (two-sided) spectral matrix of the sampled signals is
+
+    S(f) = σ² Σ_a r(f_a) G(ω_a) R(ω_a) G(ω_a)ᴴ + diag(n_f, n_r),   f_a = f + a·fs,
+
+``R = [[1, φ̄], [φ, 1]]`` with ``φ = E[e^(-iωτ)]`` over the window's speed profile (rank
+one at constant speed), ``r = |f / f_ref|^(2-w) exp(Σ c_d P_d(x))`` the road's shape (ISO
+8608's power law times smooth departures, ``P_d`` Legendre polynomials of degree ≥ 2 in
+log frequency ``x`` across the band), the sum over ``a = -A..A`` the aliasing of
+instantaneous sampling, and ``n_f, n_r`` white sensor noise. Optionally a share ``ε`` of
+the road part's diagonal is added as incoherent between the channels (a model-error
+floor; useful only on nearly noise-free data, where nothing else limits the coherence).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal, overload
+
+import numpy as np
+from numpy.polynomial import legendre
+
+from rozyn_estimator.vehicle import Vehicle
+
+CORNERS = ("front", "rear")
+_INCOHERENCE_START = 1e-4
+
+
+def delay_characteristic(
+    omega: np.ndarray, wheelbase_m: float, speed_mps: float | np.ndarray
+) -> np.ndarray:
+    """φ(ω) = E[exp(-iωτ)], τ = L/v, over the samples' speeds weighted by speed.
+
+    The road velocity's intensity grows with speed (white in time at ``w = 2``), so a
+    faster stretch weighs more. A constant speed gives the exact wheelbase delay.
+    """
+    v = np.atleast_1d(np.asarray(speed_mps, dtype=float))
+    if np.ptp(v) <= 1e-9 * v.mean():
+        return np.exp(-1j * omega * wheelbase_m / v.mean())
+    # The delays' distribution on 64 bins: cheap, and exact to far below the band.
+    weights, edges = np.histogram(wheelbase_m / v, bins=64, weights=v)
+    tau = 0.5 * (edges[:-1] + edges[1:])
+    return np.exp(-1j * np.multiply.outer(omega, tau)) @ (weights / weights.sum())
+
+
+class HalfCarSpectrum:
+    """The half car's spectral matrix and its derivatives on a frequency grid.
+
+    Args:
+        vehicle: known suspension, tyres, unsprung masses, geometry and sensor positions.
+        freq_hz: (k,) the grid [Hz].
+        fs_hz: sample rate [Hz] (for the aliasing terms).
+        speed_mps: speed, constant or per sample [m/s].
+        aliases: aliasing terms ``a = -A..A``.
+        f_ref_hz: reference frequency of the road shape ``|f/f_ref|^(2-w)``.
+        estimate_waviness, road_shape_terms, estimate_suspension, estimate_incoherence:
+            which nuisance parameters θ holds (see :class:`LikelihoodConfig`).
+        min_noise_psd: (front, rear) white floor added to the fitted noise [(m/s²)²/Hz]:
+            keeps S positive definite when the data are noise-free (θ's noise floor then
+            runs to zero and stops mattering).
+    """
+
+    def __init__(
+        self, vehicle: Vehicle, freq_hz: np.ndarray, fs_hz: float, speed_mps: float | np.ndarray,
+        aliases: int = 1, f_ref_hz: float = 3.0, estimate_waviness: bool = False,
+        estimate_suspension: bool = False, min_noise_psd: tuple[float, float] = (0.0, 0.0),
+        road_shape_terms: int = 0, estimate_incoherence: bool = False,
+        window_weights: np.ndarray | None = None,
+    ) -> None:
+        self.vehicle = vehicle
+        self.n_freq = freq_hz.size
+        self.wheelbase_m = L = vehicle.wheelbase_m
+        # A tapered periodogram's expectation is S smoothed by the taper's spectral window:
+        # the model runs on the grid extended by J Fourier bins each side (above 0 Hz).
+        c = np.ones(1) if window_weights is None else np.asarray(window_weights, dtype=float)
+        half = (c.size - 1) // 2
+        df = freq_hz[1] - freq_hz[0] if freq_hz.size > 1 else 1.0
+        room = max(0, math.ceil(freq_hz[0] / df) - 1)
+        if half > room:
+            c = c[half - room: half + room + 1]
+            half = room
+        self.kernel = c / c.sum()
+        self.half = half
+        self.n_ext = freq_hz.size + 2 * half
+        grid = freq_hz[0] + df * np.arange(-half, freq_hz.size + half) if half else freq_hz
+        shifts = np.arange(-aliases, aliases + 1)[:, None] * fs_hz
+        f = (grid[None, :] + shifts).ravel()  # (A (k + 2J),) signed
+        self.n_alias = 2 * aliases + 1
+        self.omega = w = 2.0 * np.pi * f
+        self.log_shape = np.log(np.abs(f) / f_ref_hz)  # road shape r = exp((2 - w) log_shape + ...)
+        # Legendre polynomials of degree 2.. in log frequency across the band (held at
+        # their edge values outside it, e.g. at the aliases): the road's departure from a
+        # power law.
+        edges = np.log(np.array([freq_hz.min(), freq_hz.max()]) / f_ref_hz)
+        x = np.clip((2.0 * self.log_shape - edges.sum()) / (edges[1] - edges[0]), -1.0, 1.0)
+        self.shape_basis = np.array([legendre.legval(x, np.eye(road_shape_terms + 2)[d])
+                                     for d in range(2, road_shape_terms + 2)])
+        phi = delay_characteristic(w, L, speed_mps)
+        # Front/rear road velocity covariance R = [[1, φ̄], [φ, 1]] = C Cᴴ, C lower triangular;
+        # at constant speed |φ| = 1 and the second column vanishes.
+        self.inputs = [np.array([np.ones_like(phi), phi])]
+        spread = 1.0 - np.abs(phi) ** 2
+        if np.max(spread) > 1e-12:
+            self.inputs.append(np.array([np.zeros_like(phi), np.sqrt(np.maximum(spread, 0.0))]))
+        x = np.asarray(vehicle.sensor_x_m)
+        self.sensor_map = np.column_stack([1.0 - x / L, x / L])  # P: axle -> sensor heave
+        v = vehicle
+        self.ks0 = np.array([v.suspension_stiffness_front_npm, v.suspension_stiffness_rear_npm])
+        self.cs0 = np.array([v.suspension_damping_front_nspm, v.suspension_damping_rear_nspm])
+        kt = np.array([v.tyre_stiffness_front_npm, v.tyre_stiffness_rear_npm])
+        ct = np.array([v.tyre_damping_front_nspm, v.tyre_damping_rear_nspm])
+        mt = np.array([v.unsprung_mass_front_kg, v.unsprung_mass_rear_kg])
+        self.z_tyre = kt + 1j * w[:, None] * ct  # (A k, 2)
+        self.w_tyre = self.z_tyre - (w * w)[:, None] * mt  # tyre minus wheel inertia
+        self.min_noise_psd = np.asarray(min_noise_psd, dtype=float)
+        self.estimate_waviness = estimate_waviness
+        self.estimate_suspension = estimate_suspension
+        self.names = ["ln_mass", "ln_inertia", "logit_cog", "ln_road", "ln_noise_front", "ln_noise_rear"]
+        if estimate_incoherence:
+            self.names.append("ln_incoherence")
+        if estimate_waviness:
+            self.names.append("waviness")
+        first_shape = len(self.names)
+        self.names += [f"road_shape_{d}" for d in range(2, road_shape_terms + 2)]
+        self.shape_slice = slice(first_shape, first_shape + road_shape_terms)
+        if estimate_suspension:
+            self.names += [f"ln_{q}_{c}" for q in ("stiffness", "damping") for c in CORNERS]
+        self.n_params = len(self.names)
+        self.index = {name: k for k, name in enumerate(self.names)}
+
+    # --- parameters -------------------------------------------------------------------
+    def theta(
+        self, params: np.ndarray, road: float, noise: np.ndarray, waviness: float = 2.0
+    ) -> np.ndarray:
+        """θ from (m, I, lf), road intensity σ² and noise floors (n_f, n_r)."""
+        m, inertia, lf = params
+        p = lf / self.wheelbase_m
+        th = [math.log(m), math.log(inertia), math.log(p / (1.0 - p)), math.log(road), *np.log(noise)]
+        if "ln_incoherence" in self.index:
+            th.append(math.log(_INCOHERENCE_START))
+        if self.estimate_waviness:
+            th.append(waviness)
+        th += [0.0] * self.shape_basis.shape[0]
+        if self.estimate_suspension:
+            th += [0.0] * 4
+        return np.array(th)
+
+    def physical(self, theta: np.ndarray) -> np.ndarray:
+        """(m [kg], I [kg m²], lf [m]) from θ."""
+        p = 1.0 / (1.0 + math.exp(-theta[2]))
+        return np.array([math.exp(theta[0]), math.exp(theta[1]), p * self.wheelbase_m])
+
+    def physical_jacobian(self, theta: np.ndarray) -> np.ndarray:
+        """(3, n_params) d(m, I, lf)/dθ."""
+        m, inertia, lf = self.physical(theta)
+        p = lf / self.wheelbase_m
+        jac = np.zeros((3, self.n_params))
+        jac[0, 0], jac[1, 1], jac[2, 2] = m, inertia, self.wheelbase_m * p * (1.0 - p)
+        return jac
+
+    def _mass_matrix(self, theta: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+        """M_ax (2, 2) and its derivatives by (ln m, ln I, logit lf/L)."""
+        m, inertia, lf = self.physical(theta)
+        L = self.wheelbase_m
+        lr = L - lf
+        heave = np.array([[lr * lr, lf * lr], [lf * lr, lf * lf]]) / L**2
+        pitch = np.array([[1.0, -1.0], [-1.0, 1.0]]) / L**2
+        d_lf = np.array([[-2.0 * lr, lr - lf], [lr - lf, 2.0 * lf]]) / L**2
+        p = lf / L
+        return m * heave + inertia * pitch, [m * heave, inertia * pitch, m * d_lf * L * p * (1.0 - p)]
+
+    # --- the model ----------------------------------------------------------------------
+    @overload
+    def spectrum(
+        self, theta: np.ndarray, derivatives: Literal[True] = ..., smooth: Literal[True] = ...
+    ) -> tuple[np.ndarray, np.ndarray]: ...
+
+    @overload
+    def spectrum(
+        self, theta: np.ndarray, derivatives: bool = ..., smooth: bool = ...
+    ) -> tuple[np.ndarray, np.ndarray | None]: ...
+
+    def spectrum(
+        self, theta: np.ndarray, derivatives: bool = True, smooth: bool = True
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """S (k, 2, 2) and, if asked, dS/dθ (n_params, k, 2, 2) (None when not asked).
+
+        ``smooth=False``: S on the extended grid (k + 2J), without the taper's smoothing
+        (no derivatives).
+
+        With ``R = C Cᴴ`` (``C`` the columns of :attr:`inputs`), ``G R Gᴴ = Σ_c g_c g_cᴴ``
+        with ``g_c = iω P x_c``, ``x_c = H (T ⊙ C_c)``, ``H = (diag Z - ω² M_ax)⁻¹``: every
+        quantity is a 2-vector per frequency, and a derivative of ``H`` needs no solve
+        (``∂x = -H ∂D x + H (∂T ⊙ C_c)``).
+        """
+        w = self.omega
+        w2 = w * w
+        scale = np.exp(theta[-4:]) if self.estimate_suspension else np.ones(4)
+        ks, cs = self.ks0 * scale[:2], self.cs0 * scale[2:]
+        zs = ks + 1j * w[:, None] * cs  # (F, 2) suspension
+        den = zs + self.w_tyre
+        Z = zs * self.w_tyre / den  # condensed corner stiffness
+        T = zs * self.z_tyre / den  # road height -> force on the body
+        mass, d_mass = self._mass_matrix(theta)
+        d11 = Z[:, 0] - w2 * mass[0, 0]  # D = diag(Z) - ω² M_ax (complex symmetric)
+        d22 = Z[:, 1] - w2 * mass[1, 1]
+        d12 = -w2 * mass[0, 1]
+        det = d11 * d22 - d12 * d12
+        H = np.array([[d22, -d12], [-d12, d11]]) / det  # (2, 2, F)
+        P = self.sensor_map
+        iw = 1j * w
+        Q = iw * np.einsum("ab,bcf->acf", P, H)  # iω P H
+        exponent = ((2.0 - theta[self.index["waviness"]]) if self.estimate_waviness else 0.0) * self.log_shape
+        weight = math.exp(theta[3]) * np.exp(exponent + theta[self.shape_slice] @ self.shape_basis)
+        u = [T.T * c for c in self.inputs]  # T ⊙ C_c, each (2, F)
+        x = [np.einsum("abf,bf->af", H, uc) for uc in u]
+        g = [iw * (P @ xc) for xc in x]
+        rank = self._outer_sum(g, g, weight)
+        if smooth:
+            rank = self._smooth(rank)
+        k_inc = self.index.get("ln_incoherence")
+        incoherence = math.exp(theta[k_inc]) if k_inc is not None else 0.0
+        S_road = rank + incoherence * self._diagonal(rank)
+        noise = np.exp(theta[4:6])
+        S = S_road.copy()
+        S[:, 0, 0] += noise[0] + self.min_noise_psd[0]
+        S[:, 1, 1] += noise[1] + self.min_noise_psd[1]
+        if not (derivatives and smooth):
+            return S, None
+        road = []  # ∂(rank part) on the extended grid, in the order of θ's road parameters
+        for j in range(3):  # ∂D = -ω² dM: ∂g = ω² Q dM x
+            dg = [w2 * np.einsum("abf,bf->af", Q, d_mass[j] @ xc) for xc in x]
+            road.append(self._hermitian_part(self._outer_sum(dg, g, weight)))
+        if self.estimate_waviness:
+            road.append(self._outer_sum(g, g, -weight * self.log_shape))
+        road += [self._outer_sum(g, g, weight * basis) for basis in self.shape_basis]
+        if self.estimate_suspension:
+            # ∂g = Q (∂T ⊙ C_c - ∂Z ⊙ x_c); ∂Z, ∂T are diagonal, so only corner k's entry.
+            dZ_dzs = (self.w_tyre / den) ** 2
+            dT_dzs = self.z_tyre * self.w_tyre / den**2
+            for dzs in (np.broadcast_to(ks, zs.shape), iw[:, None] * cs):  # ∂z_s/∂ln k_s, ∂ln c_s
+                for k in range(2):
+                    dZ, dT = dzs[:, k] * dZ_dzs[:, k], dzs[:, k] * dT_dzs[:, k]
+                    dg = [Q[:, k] * (dT * c[k] - dZ * xc[k]) for c, xc in zip(self.inputs, x, strict=True)]
+                    road.append(self._hermitian_part(self._outer_sum(dg, g, weight)))
+        dS = np.zeros((self.n_params, self.n_freq, 2, 2), dtype=complex)
+        road_rows = [k for k in range(self.n_params) if k not in (3, 4, 5) and k != k_inc]
+        smoothed = self._smooth(np.stack(road))
+        dS[road_rows] = smoothed + incoherence * self._diagonal(smoothed)
+        dS[3] = S_road
+        dS[4, :, 0, 0] = noise[0]
+        dS[5, :, 1, 1] = noise[1]
+        if k_inc is not None:
+            dS[k_inc] = incoherence * self._diagonal(rank)
+        return S, dS
+
+    def _smooth(self, m: np.ndarray) -> np.ndarray:
+        """The taper's spectral window applied along frequency: (..., k + 2J, 2, 2) -> (..., k, 2, 2)."""
+        if self.kernel.size == 1:
+            return m
+        k = self.n_freq
+        return sum(c * m[..., j: j + k, :, :] for j, c in enumerate(self.kernel))
+
+    @staticmethod
+    def _diagonal(m: np.ndarray) -> np.ndarray:
+        """The diagonal part of stacked 2x2 matrices (..., 2, 2)."""
+        out = np.zeros_like(m)
+        out[..., 0, 0], out[..., 1, 1] = m[..., 0, 0], m[..., 1, 1]
+        return out
+
+    def _outer_sum(self, a: list[np.ndarray], b: list[np.ndarray], weight: np.ndarray) -> np.ndarray:
+        """Σ_c weight a_c b_cᴴ folded over the aliases: (k + 2J, 2, 2) on the extended grid."""
+        out = sum(np.einsum("af,bf->fab", ac, bc.conj()) for ac, bc in zip(a, b, strict=True))
+        return (weight[:, None, None] * out).reshape(self.n_alias, self.n_ext, 2, 2).sum(axis=0)
+
+    @staticmethod
+    def _hermitian_part(m: np.ndarray) -> np.ndarray:
+        """m + mᴴ per frequency."""
+        return m + m.conj().transpose(0, 2, 1)
