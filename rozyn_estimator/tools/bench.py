@@ -1,11 +1,15 @@
-"""``rozyn bench``: speed figures of the core, as JSON.
+"""``rozyn bench``: speed figures of the core, as JSON (the command and its figures).
 
 Each figure is the median over ``repeats`` runs after one warm-up, single BLAS thread
-(as the trials run). Peak memory is the process' maximum resident set size.
+(as the trials run). Peak memory is the process' maximum resident set size. With
+``--nodes``, the estimator node under load over DDS instead
+(:mod:`rozyn_estimator.tools.node_bench`).
 """
 
 from __future__ import annotations
 
+import argparse
+import json
 import resource
 import statistics
 import sys
@@ -20,6 +24,27 @@ from rozyn_estimator.tools.trial import TrialSpec, limit_threads
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.road import Road, RoadSpec
 from sim_node.simulation import SimConfig, Simulation
+
+HELP = "time the simulator and the pipeline (JSON)"
+DESCRIPTION = None  # ``rozyn bench --help``: the usage and the options only
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--repeats", type=int, default=20, help="timing repeats (default: 20)")
+    p.add_argument("--nodes", action="store_true",
+                   help="instead: the estimator node under load over DDS (about 3 minutes)")
+    p.add_argument("--quick", action="store_true", help="with --nodes: shorter runs (about 1 minute)")
+
+
+def run(args: argparse.Namespace) -> int:
+    """``rozyn bench``: the figures as JSON on stdout."""
+    if args.nodes:
+        from rozyn_estimator.tools.node_bench import run_node_bench
+
+        print(json.dumps(run_node_bench(quick=args.quick), indent=2))
+        return 0
+    print(json.dumps(run_bench(repeats=args.repeats), indent=2))
+    return 0
 
 
 def _median_ms(fn: Callable[[], Any], repeats: int) -> float:

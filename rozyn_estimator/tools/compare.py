@@ -26,7 +26,7 @@ import numpy as np
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS, PARAM_NAMES
-from rozyn_estimator.tools.cli import add_run_options
+from rozyn_estimator.tools.options import add_run_options
 from rozyn_estimator.tools.trial import (
     TRIAL_ROADS,
     Summary,

@@ -19,6 +19,7 @@ import numpy as np
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS, PARAM_NAMES, Estimate, PipelineConfig, estimate
+from rozyn_estimator.parameters import check, param
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimBlock, SimConfig, Simulation
@@ -28,40 +29,43 @@ TRIAL_ROADS = ("iso", "laplace", "free-decay")
 
 @dataclass(frozen=True)
 class TrialSpec:
-    """The conditions of a trial; the seed picks the road."""
+    """The conditions of a trial; the seed picks the road.
 
-    road: str = "iso"
-    road_class: str = "A"
-    amplitudes: str = "fixed"
-    laplace_nu: float = 1.0
-    waviness: float = 2.0
-    speed_kmh: float = 100.0
-    duration_s: float = 100.0
-    rate_hz: float = 100.0
-    noise_std_mps2: float = 0.0
-    noise_fraction: float = 0.0  # white noise std as a share of each channel's rms
-    bias_mps2: tuple[float, float] = (0.0, 0.0)  # constant sensor offsets (front, rear)
-    speed_variation: float = 0.0  # relative amplitude of a sinusoidal speed change
-    speed_period_s: float = 60.0
-    periodic: bool = True  # road period = the record's distance (thesis eq 4-7); False: endless road
-    vehicle: Vehicle = field(default_factory=Vehicle)
-    stiffness_error: float = 0.0  # the estimator is told k_s * (1 + error), both axles
-    damping_error: float = 0.0  # the estimator is told c_s * (1 + error), both axles
-    method: str = "rozyn"
+    Checked here: every field's type, and the trial's own rules (road, method, duration,
+    relative noise, suspension errors); errors name the field. The ranges of the road and
+    sensor settings are the simulator's (:class:`SimConfig`, :class:`RoadSpec`), checked as
+    this spec's ``sim_config``.
+    """
+
+    road: str = param("iso", "road model", choices=TRIAL_ROADS)
+    road_class: str = param("A", "ISO 8608 class of the (base) road, A..H")
+    amplitudes: str = param("fixed", "fixed: the thesis' generator; gaussian: a true Gaussian road",
+                            choices=("fixed", "gaussian"))
+    laplace_nu: float = param(1.0, "Laplace road: variance of the section gamma variable")
+    waviness: float = param(2.0, "ISO 8608 waviness w")
+    speed_kmh: float = param(100.0, "vehicle speed", unit="km/h")
+    duration_s: float = param(100.0, "measurement time", unit="s", low=0.0, open_low=True)
+    rate_hz: float = param(100.0, "accelerometer rate", unit="Hz")
+    noise_std_mps2: float = param(0.0, "white sensor noise", unit="m/s^2")
+    noise_fraction: float = param(0.0, "white noise std as a share of each channel's rms", low=0.0)
+    bias_mps2: tuple[float, float] = param((0.0, 0.0), "constant sensor offsets (front, rear)", unit="m/s^2",
+                                           length=2)
+    speed_variation: float = param(0.0, "relative amplitude of a sinusoidal speed change")
+    speed_period_s: float = param(60.0, "period of the speed change", unit="s")
+    periodic: bool = param(True, "road period = the record's distance (thesis eq 4-7); false: endless road")
+    vehicle: Vehicle = param(description="the true vehicle", default_factory=Vehicle)
+    stiffness_error: float = param(0.0, "the estimator is told k_s * (1 + error), both axles; in (-1, 10)")
+    damping_error: float = param(0.0, "the estimator is told c_s * (1 + error), both axles; in (-1, 10)")
+    method: str = param("rozyn", "estimation method", choices=tuple(METHODS))
     pipeline: PipelineConfig | None = None  # overrides the method's settings
 
     def __post_init__(self) -> None:
-        if self.road not in TRIAL_ROADS:
-            raise ConfigError(f"road: must be one of {', '.join(TRIAL_ROADS)}, got {self.road!r}")
-        if self.method not in METHODS:
-            raise ConfigError(f"method: must be one of {', '.join(METHODS)}, got {self.method!r}")
-        if not self.duration_s > 0:
-            raise ConfigError(f"duration_s: must be > 0 s, got {self.duration_s!r}")
-        if not self.noise_fraction >= 0:
-            raise ConfigError(f"noise_fraction: must be >= 0, got {self.noise_fraction!r}")
-        for name in ("stiffness_error", "damping_error"):
-            if not -1.0 < getattr(self, name) < 10.0:
-                raise ConfigError(f"{name}: must lie in (-1, 10), got {getattr(self, name)!r}")
+        check(self, (
+            ("stiffness_error", lambda t: -1.0 < t.stiffness_error < 10.0, "must lie in (-1, 10)"),
+            ("damping_error", lambda t: -1.0 < t.damping_error < 10.0, "must lie in (-1, 10)"),
+            ("pipeline", lambda t: t.pipeline is None or isinstance(t.pipeline, PipelineConfig),
+             "expected PipelineConfig settings or None"),
+        ))
         self.sim_config(0)  # validates road and sim settings
 
     def sim_config(self, seed: int) -> SimConfig:
@@ -75,7 +79,7 @@ class TrialSpec:
         return SimConfig(
             vehicle=self.vehicle, road=road, seed=seed, speed_kmh=self.speed_kmh,
             speed_variation=self.speed_variation, speed_period_s=self.speed_period_s,
-            rate_hz=self.rate_hz, noise_std_mps2=self.noise_std_mps2, bias_mps2=tuple(self.bias_mps2),
+            rate_hz=self.rate_hz, noise_std_mps2=self.noise_std_mps2, bias_mps2=self.bias_mps2,
             duration_s=self.duration_s if self.periodic else 0.0,
         )
 
@@ -122,7 +126,7 @@ class TrialResult:
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON record of ``rozyn trial --json``."""
-        out = {"seed": self.seed}
+        out: dict[str, Any] = {"seed": self.seed}
         out.update(self.estimate.to_dict())
         out["truth"] = dict(zip(PARAM_NAMES, self.truth.tolist(), strict=True))
         return out

@@ -29,7 +29,10 @@ from matplotlib import colors
 from matplotlib.figure import Figure
 
 from rozyn_estimator.method import PARAM_NAMES
-from rozyn_estimator.tools.study import Cell, CellCorrelations, CellSummary, StudySettings, TrialRow
+from rozyn_estimator.tools.study.correlations import CellCorrelations
+from rozyn_estimator.tools.study.results import TrialRow
+from rozyn_estimator.tools.study.settings import Cell, StudySettings
+from rozyn_estimator.tools.study.summary import CellSummary
 
 matplotlib.use("Agg")
 
