@@ -13,7 +13,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
-from rozyn_estimator.bag.writer import default_typestore
+from rozyn_estimator.bag import default_typestore
 
 QOS_KEYS = {
     "history",

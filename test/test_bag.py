@@ -17,9 +17,15 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 
-from rozyn_estimator.bag.cdr import FieldReader
-from rozyn_estimator.bag.reader import open_bag
-from rozyn_estimator.bag.writer import LATCHED_QOS, SENSOR_QOS, BagWriter, Qos, QueuedBagWriter
+from rozyn_estimator.bag import (
+    LATCHED_QOS,
+    SENSOR_QOS,
+    BagWriter,
+    FieldReader,
+    Qos,
+    QueuedBagWriter,
+    open_bag,
+)
 from rozyn_estimator.errors import BagError
 
 NS = 1_000_000_000
@@ -222,7 +228,7 @@ def test_the_indexed_fast_path_reads_what_anyreader_reads(tmp_path, store):
 
 def test_a_queued_writer_left_open_closes_its_bag_when_the_program_ends(tmp_path):
     code = (
-        "from rozyn_estimator.bag.writer import BagWriter, QueuedBagWriter\n"
+        "from rozyn_estimator.bag import BagWriter, QueuedBagWriter\n"
         f"q = QueuedBagWriter(BagWriter({str(tmp_path / 'left')!r}))\n"
         "t = q.add_topic('/x', 'std_msgs/msg/Float64')\n"
         "for k in range(100):\n"

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from rozyn_estimator.bag.cdr import FieldReader
+from rozyn_estimator.bag import FieldReader
 from rozyn_estimator.errors import ConfigError
 
 NS = 1_000_000_000

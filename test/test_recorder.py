@@ -31,7 +31,7 @@ DOMAIN = domain("recorder")  # and the next few: this module's private ROS domai
 from rosbags.highlevel import AnyReader  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
 
-from rozyn_estimator.bag.reader import open_bag  # noqa: E402
+from rozyn_estimator.bag import open_bag  # noqa: E402
 from rozyn_estimator.errors import BagError  # noqa: E402
 from rozyn_estimator.online import CUSTOM_DATA_KEY, EstimatorConfig  # noqa: E402
 from rozyn_estimator.ros import messages as ros_io  # noqa: E402

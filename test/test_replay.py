@@ -18,12 +18,12 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 
-from rozyn_estimator.bag.reader import open_bag
-from rozyn_estimator.bag.writer import LATCHED_QOS, SENSOR_QOS, BagWriter, Qos
+from rozyn_estimator.bag import LATCHED_QOS, SENSOR_QOS, BagWriter, Qos, open_bag
 from rozyn_estimator.method import METHODS, PipelineConfig
 from rozyn_estimator.online import CUSTOM_DATA_KEY, EstimatorConfig, OnlineConfig, OnlineEstimator
 from rozyn_estimator.tools import cli
-from rozyn_estimator.tools.replay import CSV_COLUMNS, replay
+from rozyn_estimator.tools.replay import replay
+from rozyn_estimator.tools.replay_outputs import CSV_COLUMNS
 from sim_node.simulation import SimConfig, Simulation
 
 NS = 1_000_000_000

@@ -5,10 +5,15 @@ message type into the walk over its CDR layout: fixed-size parts are skipped by 
 size, strings and sequences of primitives by the length they carry, each step aligned
 (XCDR1, little endian, alignment relative to the payload after the 4-byte
 encapsulation header). The walk runs on numpy arrays of offsets, one per message, so a
-batch of 50 000 Imu messages is decoded in a few milliseconds whatever their
-``frame_id`` lengths; ``rosbags``' deserialiser (about 25 µs a message) is the fallback
-for what the walk cannot do: ROS 1 messages, big-endian CDR, or a field behind a
-sequence of messages.
+batch of Imu messages is decoded whatever their ``frame_id`` lengths without a Python
+object per message; ``rosbags``' deserialiser is the fallback for what the walk cannot
+do: ROS 1 messages, big-endian CDR, or a field behind a sequence of messages.
+
+Why we keep our own: measured on 100 000 ``sensor_msgs/Imu`` messages (header stamp and
+``linear_acceleration.z``; 2-core machine), the vectorised walk takes 21 ms (0.21 µs a
+message), rosbags' ``deserialize_cdr`` plus the attribute reads 1.25 s (12.5 µs a
+message): 58× faster, with bit-identical values (the slow path is the reference in the
+tests). Over an hour of 2 × 100 Hz messages that is 0.15 s instead of 9 s.
 
 The message's stamp is ``header.stamp`` when the type starts with a ``std_msgs/Header``.
 """
@@ -168,7 +173,8 @@ class FieldReader:
         self._getters = [attrgetter(f) for f in self.fields]
         paths = self.fields + (STAMP_FIELDS if self.has_header else ())
         walks = [_compile(typestore, msgtype, p.split(".")) for p in paths] if cdr else []
-        self._walks = walks if walks and all(w is not None for w in walks) else None
+        compiled = [w for w in walks if w is not None]
+        self._walks = compiled if walks and len(compiled) == len(walks) else None
         self.vectorised = self._walks is not None
 
     def read(self, messages: Packed | Sequence[bytes]) -> tuple[np.ndarray | None, np.ndarray]:

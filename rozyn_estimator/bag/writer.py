@@ -2,7 +2,8 @@
 
 ROS-free (``mcap``, ``rosbags``' message definitions, yaml). The recorder node, the demo
 and ``rozyn replay`` all write with :class:`BagWriter` (the recorder through
-:class:`QueuedBagWriter`); :mod:`rozyn_estimator.bag.reader` reads.
+:class:`~rozyn_estimator.bag.queued.QueuedBagWriter`); :mod:`rozyn_estimator.bag.reader`
+reads.
 
 What :class:`BagWriter` writes is what ``ros2 bag record -s mcap`` on Jazzy writes:
 
@@ -23,7 +24,6 @@ only what came after the last flush, and ``rozyn replay --salvage`` reads the re
 
 from __future__ import annotations
 
-import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
@@ -33,53 +33,12 @@ from typing import Any
 
 import yaml
 
+from rozyn_estimator.bag.qos import Qos, qos_yaml
+from rozyn_estimator.bag.typestore import message_definition
 from rozyn_estimator.errors import BagError
 
 ROSBAG2_VERSION = 9
-INFINITE_NS = 9_223_372_036_854_775_807  # rmw's "infinite" duration, as DDS discovery reports it
-NS = 1_000_000_000
 CUSTOM_DATA_RECORD = "custom_data"  # MCAP metadata record holding custom_data entries
-
-
-@dataclass(frozen=True)
-class Qos:
-    """A QoS profile as rosbag2 stores it (``offered_qos_profiles``, version 9).
-
-    Policies are rosbag2's lower-case names (``keep_last``, ``best_effort``,
-    ``transient_local``, ``automatic``, ``unknown`` …); durations in nanoseconds.
-    """
-
-    history: str = "keep_last"
-    depth: int = 10
-    reliability: str = "reliable"
-    durability: str = "volatile"
-    deadline_ns: int = INFINITE_NS
-    lifespan_ns: int = INFINITE_NS
-    liveliness: str = "automatic"
-    liveliness_lease_duration_ns: int = INFINITE_NS
-    avoid_ros_namespace_conventions: bool = False
-
-    def to_yaml_dict(self) -> dict[str, Any]:
-        """The mapping rosbag2 writes for one profile."""
-
-        def duration(ns: int) -> dict[str, int]:
-            return {"sec": ns // NS, "nsec": ns % NS}
-
-        return {
-            "history": self.history,
-            "depth": self.depth,
-            "reliability": self.reliability,
-            "durability": self.durability,
-            "deadline": duration(self.deadline_ns),
-            "lifespan": duration(self.lifespan_ns),
-            "liveliness": self.liveliness,
-            "liveliness_lease_duration": duration(self.liveliness_lease_duration_ns),
-            "avoid_ros_namespace_conventions": self.avoid_ros_namespace_conventions,
-        }
-
-
-SENSOR_QOS = Qos(depth=5, reliability="best_effort")  # rclpy's qos_profile_sensor_data
-LATCHED_QOS = Qos(depth=1, durability="transient_local")
 
 
 @dataclass
@@ -90,70 +49,6 @@ class _Topic:
     type_hash: str
     channel_id: int
     count: int = 0
-
-
-@cache
-def default_typestore() -> Any:
-    """The ROS 2 Jazzy message definitions shipped with rosbags."""
-    from rosbags.typesys import Stores, get_typestore
-
-    return get_typestore(Stores.ROS2_JAZZY)
-
-
-def absolute_topic(name: str) -> str:
-    """``accel/front`` -> ``/accel/front`` (names relative to the root namespace)."""
-    return name if name.startswith("/") else f"/{name}"
-
-
-def message_definition(msgtype: str) -> tuple[str, str]:
-    """(full ``ros2msg`` text, RIHS01 hash) of a message type, or ``("", "")`` if unknown.
-
-    Looks in rosbags' Jazzy store first, then for ``share/<pkg>/msg/<Type>.msg`` files
-    under ``AMENT_PREFIX_PATH`` (custom messages of a sourced workspace).
-    """
-    store = default_typestore()
-    if msgtype not in store.fielddefs and not _register_from_ament(store, msgtype):
-        return "", ""
-    text, _ = store.generate_msgdef(msgtype, ros_version=2)
-    return text, store.hash_rihs01(msgtype)
-
-
-def _register_from_ament(store: Any, msgtype: str) -> bool:
-    """Register ``msgtype`` (and the types it uses) from ``.msg`` files; False if not found."""
-    from rosbags.typesys import get_types_from_msg
-
-    pending, found = [msgtype], {}
-    while pending:
-        name = pending.pop()
-        if name in store.fielddefs or name in found:
-            continue
-        pkg, _, short = name.partition("/msg/")
-        text = next(
-            (
-                path.read_text()
-                for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep)
-                if prefix and (path := Path(prefix, "share", pkg, "msg", f"{short}.msg")).is_file()
-            ),
-            None,
-        )
-        if text is None:
-            return False
-        types = get_types_from_msg(text, name)
-        found.update(types)
-        for _, fields in types.values():
-            for _, (_kind, detail) in fields:
-                pending += [t for t in _type_names(detail) if "/msg/" in t]
-    store.register(found)
-    return True
-
-
-def _type_names(detail: Any) -> list[str]:
-    """Message type names referenced by a rosbags field definition."""
-    if isinstance(detail, str):
-        return [detail]
-    if isinstance(detail, tuple):
-        return [name for part in detail for name in _type_names(part)]
-    return []
 
 
 class BagWriter:
@@ -206,10 +101,19 @@ class BagWriter:
         msgdef: str | None = None,
         type_hash: str | None = None,
     ) -> int:
-        """Register a topic; returns the id to :meth:`write` with.
+        """Register a topic.
 
-        ``msgdef`` (full ``ros2msg`` text) and ``type_hash`` (RIHS01) default to what
-        :func:`message_definition` finds; a type found nowhere gets an empty schema.
+        Args:
+            name: the topic name (as it is to appear in the bag).
+            msgtype: its message type, e.g. ``sensor_msgs/msg/Imu``.
+            qos: the profiles offered on it.
+            msgdef: full ``ros2msg`` text (default: what
+                :func:`~rozyn_estimator.bag.typestore.message_definition` finds; a type
+                found nowhere gets an empty schema).
+            type_hash: RIHS01 hash (default: likewise).
+
+        Returns:
+            The id to :meth:`write` with.
         """
         if msgdef is None or not type_hash:
             known_def, known_hash = message_definition(msgtype)
@@ -223,13 +127,20 @@ class BagWriter:
             topic=name,
             message_encoding="cdr",
             schema_id=self._schemas[msgtype],
-            metadata={"offered_qos_profiles": _qos_yaml(qos), "topic_type_hash": type_hash},
+            metadata={"offered_qos_profiles": qos_yaml(qos), "topic_type_hash": type_hash},
         )
         self._topics.append(_Topic(name, msgtype, qos, type_hash, channel))
         return len(self._topics) - 1
 
     def write(self, topic_id: int, log_time_ns: int, data: bytes, publish_time_ns: int | None = None) -> None:
-        """One serialised (CDR) message; ``log_time_ns`` is the receive time."""
+        """One serialised (CDR) message.
+
+        Args:
+            topic_id: what :meth:`add_topic` returned.
+            log_time_ns: the receive time [ns].
+            data: the CDR bytes.
+            publish_time_ns: the publish time [ns] (default: ``log_time_ns``).
+        """
         topic = self._topics[topic_id]
         self._mcap.add_message(
             topic.channel_id,
@@ -316,100 +227,6 @@ class BagWriter:
 
     def __exit__(self, *exc: object) -> None:
         self.close()  # also on an error: what was written stays readable
-
-
-class QueuedBagWriter:
-    """A :class:`BagWriter` on a thread of its own, fed through a queue.
-
-    Callers (subscription callbacks) only enqueue, which no signal can interrupt
-    halfway; the writer thread compresses, writes and flushes every ``flush_period_s``.
-    A signal arriving at any moment therefore leaves a consistent file, and
-    :meth:`close` writes everything enqueued before it. The thread is not a daemon, so
-    an interpreter that exits early waits for a started close to finish; and if the
-    program ends without closing (an exception on the way out), the thread closes the
-    bag itself once the main thread is gone.
-
-    Args:
-        writer: the bag to write.
-        flush_period_s: at most this long between flushes of the pending chunk [s].
-    """
-
-    _CLOSE = object()
-
-    def __init__(self, writer: BagWriter, flush_period_s: float = 1.0) -> None:
-        import queue
-        import threading
-
-        self.writer = writer
-        self.flush_period_s = flush_period_s
-        self.enqueued = 0  # messages handed to write()
-        self.error: BaseException | None = None  # what stopped the writer thread, if anything
-        self._topics = 0
-        self._queue: queue.SimpleQueue[Any] = queue.SimpleQueue()
-        self._thread = threading.Thread(target=self._run, name="bag-writer", daemon=False)
-        self._thread.start()
-
-    @property
-    def path(self) -> Path:
-        return self.writer.path
-
-    def add_topic(
-        self, name: str, msgtype: str, qos: Sequence[Qos] = (), *, type_hash: str | None = None
-    ) -> int:
-        """As :meth:`BagWriter.add_topic` (the id is known at once)."""
-        self._queue.put(("topic", name, msgtype, tuple(qos), type_hash))
-        self._topics += 1
-        return self._topics - 1
-
-    def write(self, topic_id: int, log_time_ns: int, data: bytes) -> None:
-        self._queue.put((topic_id, log_time_ns, data))
-        self.enqueued += 1
-
-    def set_custom_data(self, key: str, value: str) -> None:
-        self._queue.put(("custom", key, value))
-
-    def close(self) -> None:
-        """Write what is queued, finish the bag and stop the thread."""
-        if self._thread.is_alive():
-            self._queue.put(self._CLOSE)
-            self._thread.join()
-
-    def _run(self) -> None:
-        import queue
-        import threading
-        import time
-
-        w = self.writer
-        due = time.monotonic() + self.flush_period_s
-        try:
-            while True:
-                try:
-                    item = self._queue.get(timeout=max(0.0, min(due - time.monotonic(), 0.2)))
-                except queue.Empty:
-                    item = None
-                if item is self._CLOSE or (item is None and not threading.main_thread().is_alive()):
-                    break
-                if item is not None:
-                    if isinstance(item[0], int):
-                        w.write(*item)
-                    elif item[0] == "topic":
-                        w.add_topic(item[1], item[2], item[3], type_hash=item[4])
-                    else:
-                        w.set_custom_data(item[1], item[2])
-                if time.monotonic() >= due:
-                    w.flush()
-                    due = time.monotonic() + self.flush_period_s
-        except BaseException as exc:  # disk full, …: keep it for the owner to report
-            self.error = exc
-        finally:
-            try:
-                w.close()
-            except Exception as exc:
-                self.error = self.error or exc
-
-
-def _qos_yaml(qos: Sequence[Qos]) -> str:
-    return yaml.safe_dump([q.to_yaml_dict() for q in qos], sort_keys=False).strip() if qos else ""
 
 
 @cache

@@ -13,36 +13,43 @@ driven by the message stamps) in the order the bag received them, and writes
 The estimator is configured from the bag: the recorder stores the estimator node's
 configuration in it, so a recorded run replays to the estimates the node published.
 Options override it; a bag without one (``ros2 bag record``) uses the node's defaults.
+
+This module feeds (the command protocol of ``rozyn``: :data:`HELP`, :data:`DESCRIPTION`,
+:func:`add_arguments`, :func:`run`; :func:`replay`, :func:`resolve_config` and the field
+readers); :mod:`rozyn_estimator.tools.replay_outputs` holds the result and writes the
+outputs; :mod:`rozyn_estimator.tools.replay_report` prints the closing report.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from rozyn_estimator.bag.cdr import FieldReader
-from rozyn_estimator.bag.reader import BagReader, RawBatch, open_bag
-from rozyn_estimator.bag.writer import BagWriter, absolute_topic
+from rozyn_estimator.bag import BagReader, FieldReader, RawBatch, TopicInfo, absolute_topic, open_bag
 from rozyn_estimator.errors import BagError, ConfigError
 from rozyn_estimator.online import (
     CUSTOM_DATA_KEY,
-    LEVEL_NAMES,
     NS,
     SPEED_TOPIC_TYPES,
     EstimatorConfig,
     OnlineEstimator,
     SpeedSamples,
-    Update,
 )
+from rozyn_estimator.tools.replay_outputs import (
+    PUBLISHED_TOPIC,
+    TRUTH_TOPIC,
+    ReplayedUpdate,
+    ReplayOutputs,
+    ReplayResult,
+)
+from rozyn_estimator.tools.replay_report import format_summary
 
 HELP = "replay a bag through the online estimator offline: CSV of updates + output bag"
 DESCRIPTION = (
@@ -53,51 +60,15 @@ DESCRIPTION = (
     "recorded in the bag (bag_recorder and rozyn demo store it), else with the node's defaults; "
     "options override. No DDS needed."
 )
-TRUTH_TOPIC = "/sim/ground_truth"
-PUBLISHED_TOPIC = "/inertia"
-PARAM_SHORT = ("m", "iyy", "lf")
-
-
-@dataclass(frozen=True)
-class ReplayedUpdate:
-    """One update and the bag time [ns] of the message that made it due."""
-
-    update: Update
-    log_ns: int
-
-
-@dataclass
-class ReplayResult:
-    """What a replay did; ``feed_s`` is reading, decoding and feeding, ``update_s`` the updates."""
-
-    bag: Path
-    config: EstimatorConfig
-    config_source: str
-    updates: list[ReplayedUpdate] = field(default_factory=list)
-    accel_messages: int = 0
-    speed_messages: int = 0
-    feed_s: float = 0.0
-    update_s: float = 0.0
-    truth: tuple[float, float, float] | None = None  # from sim/ground_truth (m, I, lf)
-    recorded: dict[int, tuple[float, float, float]] = field(default_factory=dict)  # stamp -> node's estimate
-    out_dir: Path | None = None
-    out_counts: dict[str, int] = field(default_factory=dict)
-    damage: list[str] = field(default_factory=list)
-    dropped: dict[str, int] = field(default_factory=dict)
-    resets: int = 0
-
-    @property
-    def messages_per_s(self) -> float:
-        """Accelerometer messages read, decoded and fed per second (updates excluded)."""
-        return self.accel_messages / self.feed_s if self.feed_s > 0 else 0.0
-
-    @property
-    def published(self) -> list[ReplayedUpdate]:
-        return [u for u in self.updates if u.update.published]
 
 
 # ---------------------------------------------------------------------- CLI
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``rozyn replay``.
+
+    Args:
+        p: the sub-command's parser.
+    """
     p.add_argument("bag", help="rosbag2 directory, or an .mcap, .db3 or ROS 1 .bag file")
     src = p.add_argument_group("input (default: the configuration recorded in the bag, else the node's)")
     src.add_argument("--front-topic", metavar="T", help="front accelerometer topic")
@@ -133,6 +104,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``rozyn replay``: replay the bag, write the outputs, print the report.
+
+    Args:
+        args: the parsed options of :func:`add_arguments`.
+
+    Returns:
+        0 (the exit status).
+
+    Raises:
+        BagError: the bag cannot be read, the output directory is not empty, or no
+            update fell due.
+        ConfigError: an option or the recorded configuration is invalid.
+    """
     bag = Path(args.bag)
     out_dir = Path(args.out) if args.out else Path("out", "replay", f"{bag.name}-{_utc()}")
     with open_bag(bag, salvage=args.salvage) as reader:
@@ -156,7 +140,18 @@ def run(args: argparse.Namespace) -> int:
 
 
 def resolve_config(reader: BagReader, args: argparse.Namespace) -> tuple[EstimatorConfig, str]:
-    """The bag's recorded configuration (or the defaults) with the options applied."""
+    """The bag's recorded configuration (or the defaults) with the options applied.
+
+    Args:
+        reader: the open bag.
+        args: options as :func:`add_arguments` names them (missing ones are unset).
+
+    Returns:
+        The configuration and where it came from, in words.
+
+    Raises:
+        ConfigError: an invalid option or recorded setting, or an unknown ``--method``.
+    """
     config, source = EstimatorConfig(), "the node's defaults (the bag records no estimator configuration)"
     if getattr(args, "ignore_bag_config", False):
         source = "the node's defaults (--ignore-bag-config)"
@@ -197,7 +192,18 @@ def resolve_config(reader: BagReader, args: argparse.Namespace) -> tuple[Estimat
 def replay(bag: str | Path, config: EstimatorConfig | None = None, **kwargs: Any) -> ReplayResult:
     """Replay a bag (with its recorded configuration unless ``config`` is given).
 
-    Keyword arguments are those of :func:`replay_reader`, plus ``salvage``.
+    Args:
+        bag: the bag's path.
+        config: the estimator's configuration (default: as recorded in the bag).
+        **kwargs: those of :func:`replay_reader`, plus ``salvage`` (of :func:`open_bag
+            <rozyn_estimator.bag.reader.open_bag>`).
+
+    Returns:
+        What the replay did.
+
+    Raises:
+        BagError: as :func:`replay_reader`, or the bag cannot be opened.
+        ConfigError: as :func:`replay_reader`.
     """
     salvage = kwargs.pop("salvage", False)
     with open_bag(bag, salvage=salvage) as reader:
@@ -220,7 +226,17 @@ def replay_reader(
 ) -> ReplayResult:
     """Feed an open bag through a fresh online estimator; write the outputs to ``out_dir``.
 
-    Messages are read ``batch_size`` at a time (the result does not depend on it).
+    Args:
+        reader: the open bag.
+        config: the estimator's configuration (topics, field, online settings …).
+        out_dir: where to write ``updates.csv`` and ``estimates/`` (None: nothing written).
+        write_bag: write ``estimates/`` too, not the CSV only.
+        progress: show a progress bar on stderr.
+        batch_size: messages read at a time (the result does not depend on it).
+
+    Returns:
+        What the replay did (updates, counts, timings, the bag's truth and recorded
+        estimates).
 
     Raises:
         BagError: a topic is missing or empty, or the bag is damaged.
@@ -253,7 +269,7 @@ def replay_reader(
     online = OnlineEstimator(
         config.vehicle, config.online, config.pipeline, (config.front_topic, config.rear_topic)
     )
-    outputs = _Outputs(Path(out_dir), config, reader, write_bag) if out_dir is not None else None
+    outputs = ReplayOutputs(Path(out_dir), config, reader, write_bag) if out_dir is not None else None
     total = sum(reader.topics[t].count for t in topics)
     bar = _progress(total, progress)
     try:
@@ -263,7 +279,7 @@ def replay_reader(
             a_idx, chan, stamps, values = _accelerations(batch, accel)
             s_idx, s_stamps, s_values = _speeds(batch, speed)
             for name, i in extra.items():
-                for j in np.flatnonzero(batch.topic == i):
+                for j in np.flatnonzero(batch.topic == i).tolist():
                     msgtype = reader.topics[name].msgtype
                     _note_extra(result, reader, name, batch.messages.message(j), msgtype, config)
             jobs = online.add_batch(chan, stamps, values, a_idx, SpeedSamples(s_stamps, s_values, s_idx))
@@ -318,7 +334,7 @@ def _speeds(batch: RawBatch, reader: FieldReader | None) -> tuple[np.ndarray, np
     return idx, batch.log_ns[idx] if stamps is None else stamps, speeds
 
 
-def _field_reader(reader: BagReader, info: Any, fields: Sequence[str]) -> FieldReader:
+def _field_reader(reader: BagReader, info: TopicInfo, fields: Sequence[str]) -> FieldReader:
     try:
         return FieldReader(reader.typestore, info.msgtype, fields, reader.deserialize, cdr=reader.cdr)
     except ConfigError as exc:
@@ -341,199 +357,6 @@ def _note_extra(
         result.truth = values
     else:
         result.recorded[msg.header.stamp.sec * NS + msg.header.stamp.nanosec] = values
-
-
-# ------------------------------------------------------------------- outputs
-class _Outputs:
-    """``updates.csv`` and the output bag of one replay."""
-
-    def __init__(self, out_dir: Path, config: EstimatorConfig, reader: BagReader, write_bag: bool) -> None:
-        if out_dir.exists() and any(out_dir.iterdir()):
-            raise BagError(f"{out_dir} exists and is not empty; choose another --out")
-        ros_bag = None
-        if write_bag:
-            try:
-                from rozyn_estimator.ros import serialized as ros_bag  # rclpy's serialisation (no DDS)
-            except ImportError as exc:
-                raise BagError(f"the output bag needs rclpy ({exc}); --no-bag writes the CSV only") from None
-        out_dir.mkdir(parents=True, exist_ok=True)
-        self.out_dir = out_dir
-        self.config = config
-        self.counts: dict[str, int] = {}
-        self._csv_file = (out_dir / "updates.csv").open("w", newline="")
-        self._csv = csv.writer(self._csv_file)
-        self._csv.writerow(CSV_COLUMNS)
-        self._bag: BagWriter | None = None
-        if ros_bag is not None:
-            self._messages = ros_bag.update_messages
-            self._bag = BagWriter(out_dir / "estimates")
-            self._bag.set_custom_data(CUSTOM_DATA_KEY, config.to_json())
-            self._bag.set_custom_data("rozyn_estimator.replayed_from", str(reader.path.resolve()))
-            self._ids = {
-                t: self._bag.add_topic(t, msgtype, [qos]) for t, msgtype, qos in ros_bag.OUTPUT_TOPICS
-            }
-
-    def write(self, replayed: ReplayedUpdate, online: OnlineEstimator) -> None:
-        self._csv.writerow(csv_row(replayed))
-        if self._bag is None:
-            return
-        for topic, data in self._messages(replayed.update, online.report(), self.config):
-            self._bag.write(self._ids[topic], replayed.log_ns, data)
-
-    def close(self) -> None:
-        self._csv_file.close()
-        if self._bag is not None:
-            self._bag.close()
-            self.counts = self._bag.counts
-
-
-CSV_COLUMNS = (
-    "stamp_s",
-    "stamp_ns",
-    "bag_time_ns",
-    "status",
-    "published",
-    "message",
-    "mass_kg",
-    "pitch_inertia_kgm2",
-    "cog_from_front_axle_m",
-    "mass_kg_std",
-    "pitch_inertia_kgm2_std",
-    "cog_from_front_axle_m_std",
-    *(f"cov_{a}_{b}" for a in PARAM_SHORT for b in PARAM_SHORT),
-    "stage",
-    "mode1_freq_hz",
-    "mode1_damping",
-    "mode2_freq_hz",
-    "mode2_damping",
-    "window_fill",
-    "sample_rate_hz",
-    "speed_mps",
-    "pipeline_ms",
-)
-
-
-def csv_row(replayed: ReplayedUpdate) -> list[Any]:
-    """One CSV row (floats at full precision; empty where there is no number)."""
-    u = replayed.update
-    est = u.estimate
-    ok = u.published
-    params = list(est.params) if ok else [""] * 3
-    cov = est.covariance if ok and est.covariance is not None else None
-    std = list(np.sqrt(np.diag(cov))) if cov is not None else [""] * 3
-    modes = []
-    for k in range(2):
-        mode = est.modes[k] if est is not None and len(est.modes) > k else None
-        modes += [mode.freq_hz, mode.damping_ratio] if mode else ["", ""]
-    return [
-        f"{u.stamp_ns / NS:.9f}",
-        u.stamp_ns,
-        replayed.log_ns,
-        LEVEL_NAMES[u.level],
-        int(ok),
-        u.message,
-        *(_num(x) for x in params),
-        *(_num(x) for x in std),
-        *(_num(x) for x in (cov.ravel() if cov is not None else [""] * 9)),
-        est.stage if est is not None else "",
-        *(_num(x) for x in modes),
-        _num(u.window_fill),
-        _num(u.fs_hz),
-        _num(u.speed_mps if u.speed_mps is not None else ""),
-        _num(est.elapsed_ms if est is not None else ""),
-    ]
-
-
-def _num(x: Any) -> Any:
-    return repr(float(x)) if isinstance(x, float | np.floating | int) and not isinstance(x, bool) else x
-
-
-# ------------------------------------------------------------------- report
-def format_summary(result: ReplayResult) -> str:
-    """The closing report: throughput, configuration, a table of the estimates, checks."""
-    cfg = result.config
-    lines = [
-        f"replayed {result.bag}: {result.accel_messages} accelerometer messages "
-        f"({absolute_topic(cfg.front_topic)}, {absolute_topic(cfg.rear_topic)}, {cfg.field})"
-        + (
-            f" and {result.speed_messages} speed messages ({absolute_topic(cfg.speed_topic)})"
-            if cfg.speed_topic
-            else ""
-        ),
-        f"  read, decoded and fed in {result.feed_s:.2f} s ({result.messages_per_s:,.0f} msg/s); "
-        f"{len(result.updates)} updates in {result.update_s:.2f} s",
-        f"  configuration: {result.config_source}",
-        f"  window {cfg.online.window_s:g} s, update every {cfg.online.update_period_s:g} s, "
-        f"pipeline refine={cfg.pipeline.refine}",
-    ]
-    for note in result.damage:
-        lines.append(f"  salvaged: {note}")
-    if result.resets or result.dropped:
-        dropped = ", ".join(f"{k}: {v}" for k, v in sorted(result.dropped.items())) or "none"
-        lines.append(f"  window resets: {result.resets}; dropped: {dropped}")
-    lines += ["", _table(result)]
-    published = result.published
-    if published:
-        p = np.array([u.update.estimate.params for u in published])
-        lines.append(f"{'mean over updates':<22}" + "".join(f"{x:>24.6g}" for x in p.mean(axis=0)))
-        if result.truth is not None:
-            err = (p[-1] / np.array(result.truth) - 1) * 100
-            lines.append(
-                f"{'truth (' + TRUTH_TOPIC + ')':<22}" + "".join(f"{x:>24.6g}" for x in result.truth)
-            )
-            lines.append(f"{'last vs truth':<22}" + "".join(f"{e:>+23.2f}%" for e in err))
-    if result.recorded:
-        lines.append(_against_recorded(result))
-    if result.out_dir is not None:
-        counts = ", ".join(f"{t} {n}" for t, n in result.out_counts.items())
-        lines += [
-            "",
-            f"wrote {result.out_dir / 'updates.csv'}"
-            + (f" and {result.out_dir / 'estimates'} ({counts})" if counts else ""),
-        ]
-    return "\n".join(lines)
-
-
-def _table(result: ReplayResult, max_rows: int = 24) -> str:
-    head = (
-        f"{'stamp [s]':>12}  {'status':<6}{'mass [kg]':>24}{'pitch inertia [kg m2]':>24}"
-        f"{'CoG from front [m]':>24}"
-    )
-    rows = [head]
-    updates = result.updates
-    shown = updates if len(updates) <= max_rows else updates[-max_rows:]
-    if len(shown) < len(updates):
-        rows.append(f"{'…':>12}  ({len(updates) - len(shown)} earlier updates in the CSV)")
-    for ru in shown:
-        u = ru.update
-        if u.published:
-            std = u.estimate.std if u.estimate.std is not None else np.full(3, np.nan)
-            cells = "".join(
-                f"{f'{v:.6g} ± {s:.3g}':>24}" for v, s in zip(u.estimate.params, std, strict=True)
-            )
-        else:
-            cells = f"  {u.message if len(u.message) <= 90 else u.message[:89] + '…'}"
-        rows.append(f"{u.stamp_ns / NS:>12.3f}  {LEVEL_NAMES[u.level]:<6}{cells}")
-    return "\n".join(rows)
-
-
-def _against_recorded(result: ReplayResult) -> str:
-    """How the replayed estimates compare with those the node published in the bag."""
-    replayed = {u.update.stamp_ns: u.update.estimate.params for u in result.published}
-    common = sorted(set(replayed) & set(result.recorded))
-    if not common:
-        return f"no stamp of the {len(result.recorded)} estimates on {PUBLISHED_TOPIC} is in the replay"
-    rel = max(float(np.max(np.abs(np.array(result.recorded[s]) / replayed[s] - 1))) for s in common)
-    text = (
-        f"against the {len(result.recorded)} estimates recorded on {PUBLISHED_TOPIC}: {len(common)} at "
-        f"the same stamps, max relative difference {rel:.1e}"
-    )
-    extra, missing = len(set(replayed) - set(result.recorded)), len(set(result.recorded) - set(replayed))
-    if extra:
-        text += f"; {extra} more in the replay (not yet published when the recording stopped?)"
-    if missing:
-        text += f"; {missing} recorded ones the replay does not have"
-    return text
 
 
 def _progress(total: int, enabled: bool) -> Any:
