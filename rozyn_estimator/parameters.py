@@ -66,11 +66,11 @@ class Param:
     length: int | None = None
 
     def range_text(self) -> str:
-        """The range as a README cell: ``0.1 … 3600``, ``> 0``, ``a | b``."""
+        """The range as a README cell: ``[0.1, 3600]``, ``> 0``, ``a | b``."""
         if self.choices:
             return " \\| ".join(self.choices)
         if self.low is not None and self.high is not None:
-            return f"{'(' if self.open_low else ''}{_g(self.low)} … {_g(self.high)}"
+            return f"{'(' if self.open_low else '['}{_g(self.low)}, {_g(self.high)}]"
         if self.low is not None:
             return f"{'>' if self.open_low else '≥'} {_g(self.low)}"
         if self.high is not None:
@@ -158,9 +158,11 @@ def coerce(name: str, spec: Param, default: Any, value: Any) -> Any:
 def _number(name: str, spec: Param, value: Any, integer: bool) -> Any:
     kind = "an integer" if integer else "a number"
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ConfigError(f"{name}: expected {kind}{_unit(spec)}, got {shown(value)}")
+        unit = f" in {spec.unit}" if spec.unit else ""
+        raise ConfigError(f"{name}: expected {kind}{unit}, got {shown(value)}")
     if integer and not isinstance(value, int):
         raise ConfigError(f"{name}: expected {kind}, got {shown(value)}")
+    given = value
     if not integer:
         try:
             value = float(value)
@@ -172,7 +174,7 @@ def _number(name: str, spec: Param, value: Any, integer: bool) -> Any:
     outside = (low is not None and (value <= low if spec.open_low else value < low)) or \
         (high is not None and value > high)
     if outside:
-        raise ConfigError(f"{name}: {range_rule(spec)}, got {shown(value)}")
+        raise ConfigError(f"{name}: {range_rule(spec)}, got {shown(given)}")
     return value
 
 
@@ -191,7 +193,10 @@ def _unit(spec: Param) -> str:
 
 
 def _g(x: float | None) -> str:
-    return f"{x:g}"
+    """A bound as written: integers in full (2147483647, not 2.14748e+09), others short."""
+    if x is None:
+        return ""
+    return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else f"{x:g}"
 
 
 def shown(value: Any) -> str:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from rozyn_estimator.tools.cli import main
+from rozyn_estimator.tools.cli import COMMANDS, main
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -66,3 +66,47 @@ def test_every_command_has_help():
     for command in ([], ["trial"], ["demo"], ["bench"], ["replay"], ["study"], ["compare"]):
         done = subprocess.run([str(exe), *command, "--help"], capture_output=True, text=True)
         assert done.returncode == 0 and "usage: rozyn" in done.stdout, (command, done.stderr)
+
+
+def _tool_modules_after(argv: list[str]) -> list[str]:
+    """The rozyn_estimator.tools modules imported by ``main(argv)`` in a fresh interpreter."""
+    code = ("import sys\nfrom rozyn_estimator.tools.cli import main\n"
+            f"try:\n    main({argv!r})\nexcept SystemExit:\n    pass\n"
+            "print(' '.join(sorted(m for m in sys.modules if m.startswith('rozyn_estimator.tools.'))))")
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
+    return done.stdout.split("\n")[-2].split()
+
+
+def test_top_level_help_imports_no_command():
+    assert _tool_modules_after(["--help"]) == ["rozyn_estimator.tools.cli"]
+
+
+def test_only_the_invoked_command_is_imported():
+    loaded = _tool_modules_after(["trial", "--help"])
+    assert "rozyn_estimator.tools.trial_command" in loaded
+    others = {f"rozyn_estimator.tools.{m}" for m in ("compare", "study", "replay", "demo", "bench")}
+    assert not others & set(loaded)
+
+
+def test_the_registry_matches_the_command_modules():
+    assert [c.name for c in COMMANDS] == ["trial", "demo", "bench", "replay", "study", "compare"]
+    for command in COMMANDS:
+        module = command.load()
+        assert command.help == module.HELP, command.name
+        assert hasattr(module, "DESCRIPTION") and callable(module.add_arguments) and callable(module.run)
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["demo", "--window-s", "5000", "--no-record"], "rozyn demo: error: window_s: must lie in [1, 3600] s"),
+    (["demo", "--speed-kmh", "0", "--no-record"], "rozyn demo: error: speed_kmh: must lie in [1, 400] km/h"),
+    (["replay", "bags/samples/iso-a-100kmh", "--window-s", "0.5", "--no-bag"],
+     "rozyn replay: error: window_s: must lie in [1, 3600] s"),
+])
+def test_tool_options_follow_the_nodes_rules(args, words, capsys, tmp_path):
+    """The demo and replay check their options with the nodes' own rules: one line, status 1."""
+    root = Path(__file__).resolve().parents[1]
+    args = [str(root / a) if a.startswith("bags/") else a for a in args] + (
+        ["--out", str(tmp_path / "r")] if args[0] == "replay" else [])
+    assert main(args) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(words) and "\n" not in err

@@ -62,7 +62,6 @@ def estimator_status(got):
 def test_sim_and_estimator_in_one_process(ros):
     """ISO A, fixed amplitudes, 100 km/h, sim time at 20x: after 150 s within 5 %."""
     got = collect(ros.probe)
-    started = time.monotonic()
     sim = ros.add(SimNode(context=ros.context, parameter_overrides=[
         Parameter("time_mode", value="sim"), Parameter("real_time_factor", value=20.0),
         Parameter("duration_s", value=150.0), Parameter("wait_for_subscribers", value=True)]))
@@ -73,7 +72,6 @@ def test_sim_and_estimator_in_one_process(ros):
         return got["covariance"] and ros_io.covariance_stamp_ns(got["covariance"][-1]) >= 145 * NS
 
     ros.spin_until(covariance_of_145, 10.0)
-    elapsed = time.monotonic() - started
     last = got["inertia"][-1]
     assert last.header.stamp.sec == 145 and last.header.frame_id == "base_link"
     estimate = np.array([last.inertia.m, last.inertia.iyy, -last.inertia.com.x])
@@ -95,7 +93,6 @@ def test_sim_and_estimator_in_one_process(ros):
     assert status.level in (b"\x00", b"\x01") and values["dropped_total"] == "0", (status.message, values)
     assert float(values["mass_kg"]) == pytest.approx(last.inertia.m, rel=1e-5)
     assert {"mode1_freq_hz", "mode2_damping", "window_fill_pct", "pipeline_ms", "speed_mps"} <= set(values)
-    assert elapsed < 60.0
 
 
 def test_console_scripts_across_processes():

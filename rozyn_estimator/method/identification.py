@@ -78,7 +78,7 @@ def state_transition_modes(decays: np.ndarray, dt_s: float, p_blocks: int) -> li
     a1 = np.linalg.solve(gram + ridge, phi @ phi_next.transpose(0, 2, 1)).transpose(0, 2, 1)
     z, vecs = np.linalg.eig(a1)
     first = states[:, :, 0].transpose(0, 2, 1)  # (B, m p, R): each decay's first state
-    out = []
+    out: list[list[Mode]] = []
     for b in range(batch):
         try:
             coords = np.linalg.solve(vecs[b], first[b])  # modal coordinates: excitation

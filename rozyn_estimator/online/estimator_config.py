@@ -100,9 +100,7 @@ def _from_dict(default: Any, data: Any, where: str, ignored: list[str]) -> Any:
         current = getattr(default, name)
         if dataclasses.is_dataclass(current):
             value = _from_dict(current, value, f"{where}.{name}", ignored)
-        elif isinstance(current, tuple):
-            value = tuple(value)
-        values[name] = value
+        values[name] = value  # checked by the dataclass
     try:
         return dataclasses.replace(default, **values)
     except (TypeError, ValueError) as exc:

@@ -53,6 +53,16 @@ class Update:
         """True when there is an estimate to publish."""
         return self.estimate is not None and self.estimate.ok
 
+    @property
+    def params(self) -> np.ndarray | None:
+        """(3,) the estimate to publish (``PARAM_NAMES`` order), None when there is none."""
+        return self.estimate.params if self.estimate is not None and self.estimate.ok else None
+
+    @property
+    def covariance(self) -> np.ndarray | None:
+        """(3, 3) its covariance, None when there is none."""
+        return self.estimate.covariance if self.estimate is not None and self.estimate.ok else None
+
 
 @dataclass(frozen=True)
 class Health:

@@ -146,7 +146,7 @@ class EstimatorNode(Node):
         if update.published:
             cfg = self.config
             self.pub_inertia.publish(ros_io.inertia_msg(update, cfg.frame_id, cfg.front_axle_x_m))
-            if update.estimate.covariance is not None:
+            if update.covariance is not None:
                 self.pub_covariance.publish(ros_io.covariance_msg(update))
             self.updates_published += 1
         self._publish_health()

@@ -40,11 +40,13 @@ def descriptor(name: str, default: Any, spec: Param) -> ParameterDescriptor:
         d.additional_constraints = f"one of: {', '.join(spec.choices)}"
     elif spec.low is not None or spec.high is not None:
         d.additional_constraints = parameters.range_rule(spec)
-    closed = spec.low is not None and spec.high is not None and not spec.open_low
-    if closed and isinstance(default, int) and not isinstance(default, bool):
-        d.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=0)]
-    elif closed and isinstance(default, float):
-        d.floating_point_range = [FloatingPointRange(from_value=spec.low, to_value=spec.high, step=0.0)]
+    low, high = spec.low, spec.high
+    if low is None or high is None or spec.open_low:
+        return d  # ROS ranges are closed: the config's own check enforces the rest
+    if isinstance(default, int) and not isinstance(default, bool):
+        d.integer_range = [IntegerRange(from_value=int(low), to_value=int(high), step=0)]
+    elif isinstance(default, float):
+        d.floating_point_range = [FloatingPointRange(from_value=float(low), to_value=float(high), step=0.0)]
     return d
 
 
@@ -77,7 +79,7 @@ def spin_node(node_factory: Any, args: Sequence[str] | None = None) -> int:
     """
     name = getattr(node_factory, "NAME", "node")
     try:
-        rclpy.init(args=args)
+        rclpy.init(args=None if args is None else list(args))
     except _rclpy.RCLError as exc:  # malformed --ros-args
         print(f"[{name}] invalid arguments: {str(exc).split(', at ')[0]}", file=sys.stderr)
         return 2

@@ -61,7 +61,9 @@ def field_getter(path: str, msg_type: Any = None) -> attrgetter:
 
 def inertia_msg(update: Update, frame_id: str, front_axle_x_m: float) -> InertiaStamped:
     """The published estimate (see the module docstring for the conventions)."""
-    m, iyy, lf = (float(x) for x in update.estimate.params)
+    if update.params is None:
+        raise ValueError("the update has no estimate to publish")
+    m, iyy, lf = (float(x) for x in update.params)
     msg = InertiaStamped()
     msg.header.stamp = to_time(update.stamp_ns)
     msg.header.frame_id = frame_id
@@ -84,7 +86,9 @@ def covariance_msg(update: Update) -> Float64MultiArray:
         MultiArrayDimension(label=COVARIANCE_LABEL, size=3, stride=9),
         MultiArrayDimension(label=f"stamp={t.sec}.{t.nanosec:09d}", size=3, stride=3),
     ]
-    msg.data = [float(x) for x in update.estimate.covariance.ravel()]
+    if update.covariance is None:
+        raise ValueError("the update has no covariance to publish")
+    msg.data = [float(x) for x in update.covariance.ravel()]
     return msg
 
 

@@ -22,6 +22,7 @@ is read back with ``rozyn replay --salvage``.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import signal
 import sys
@@ -42,7 +43,7 @@ from rclpy.parameter import parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
-from rozyn_estimator.bag.writer import BagWriter, Qos, QueuedBagWriter
+from rozyn_estimator.bag import BagWriter, Qos, QueuedBagWriter
 from rozyn_estimator.errors import BagError, ConfigError
 from rozyn_estimator.online import CUSTOM_DATA_KEY, EstimatorConfig
 from rozyn_estimator.parameters import build, check, param
@@ -225,7 +226,7 @@ class BagRecorder(Node):
         self.create_subscription(
             cls,
             topic,
-            lambda data, tid=tid: self._on_message(tid, data),
+            functools.partial(self._on_message, tid),
             adapted_qos(offered, self._p.qos_depth),
             raw=True,
         )
@@ -303,7 +304,7 @@ class BagRecorder(Node):
         self.get_logger().info(f"wrote {self.path}: {total} messages on {len(counts)} topics")
         if self._p.estimator_node and self.estimator_config is None:
             self.get_logger().warning(
-                f"{self._p['estimator_node']} was not seen: the bag holds no estimator configuration"
+                f"{self._p.estimator_node} was not seen: the bag holds no estimator configuration"
             )
         if self.writer.error is not None:
             raise BagError(f"writing {self.path} failed: {self.writer.error}")
@@ -332,7 +333,7 @@ def main(args: Sequence[str] | None = None) -> int:
     """Run until SIGINT/SIGTERM, then drain, close the bag and print its path (exit 0)."""
     stop = threading.Event()
     try:
-        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        rclpy.init(args=None if args is None else list(args), signal_handler_options=SignalHandlerOptions.NO)
     except Exception as exc:  # malformed --ros-args
         print(f"[{NODE_NAME}] invalid arguments: {str(exc).split(', at ')[0]}", file=sys.stderr)
         return 2

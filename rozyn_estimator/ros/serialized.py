@@ -12,7 +12,7 @@ from collections.abc import Sequence
 
 from rclpy.serialization import serialize_message
 
-from rozyn_estimator.bag.writer import Qos, absolute_topic
+from rozyn_estimator.bag import Qos, absolute_topic
 from rozyn_estimator.online import EstimatorConfig, Health, Update
 from rozyn_estimator.ros import messages as ros_io
 
@@ -34,7 +34,7 @@ def update_messages(update: Update, health: Health, config: EstimatorConfig) -> 
     if update.published:
         msg = ros_io.inertia_msg(update, config.frame_id, config.front_axle_x_m)
         out.append(("/inertia", serialize_message(msg)))
-        if update.estimate.covariance is not None:
+        if update.covariance is not None:
             out.append(("/inertia/covariance", serialize_message(ros_io.covariance_msg(update))))
     diag = ros_io.diagnostic_array(
         health, absolute_topic(config.node_name), config.hardware_id, update.stamp_ns

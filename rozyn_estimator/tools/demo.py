@@ -76,9 +76,27 @@ def _row(label: str, value: float, std: float, truth: float, digits: int) -> str
     return f"{label} = {value:.{digits}f} ± {std:.{digits}f} ({err:+.2f} %)"
 
 
+def node_values(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The estimator's and the simulator's parameter values for the demo's options, checked
+    by the nodes' own rules (ConfigError names a bad one) before anything starts."""
+    from rozyn_estimator.online import EstimatorConfig
+    from rozyn_estimator.parameters import build
+    from sim_node.node import NODE_DEFAULTS, SimNodeOptions
+
+    estimator = {"speed_topic": "sim/speed", "window_s": args.window_s, "qos_depth": QUEUE_DEPTH}
+    sim = {"time_mode": "sim", "real_time_factor": args.real_time_factor, "duration_s": args.duration_s,
+           "wait_for_subscribers": True, "road.kind": args.road, "road.amplitudes": args.amplitudes,
+           "speed_kmh": args.speed_kmh, "seed": args.seed, "noise_std_mps2": args.noise_std_mps2}
+    EstimatorConfig.from_parameters(estimator)
+    build(SimNodeOptions(), sim)
+    build(NODE_DEFAULTS, sim)
+    return estimator, sim
+
+
 def run(args: argparse.Namespace) -> int:
     if args.bag and not args.no_record and Path(args.bag).exists():
         raise BagError(f"{args.bag} exists already; a bag is never overwritten")
+    estimator_values, sim_values = node_values(args)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     domain = int(os.environ.get("ROS_DOMAIN_ID", 0)) or 150 + os.getpid() % 80
     import rclpy
@@ -109,9 +127,10 @@ def run(args: argparse.Namespace) -> int:
     probe.create_subscription(
         InertiaStamped, "sim/ground_truth", lambda m: setattr(seen, "truth", m), latched
     )
-    probe.create_subscription(
-        InertiaStamped, "inertia", lambda m: seen.inertia.__setitem__(ros_io.stamp_ns(m.header.stamp), m), 10
-    )
+    def on_inertia(msg: Any) -> None:
+        seen.inertia[ros_io.stamp_ns(msg.header.stamp)] = msg
+
+    probe.create_subscription(InertiaStamped, "inertia", on_inertia, 10)
     probe.create_subscription(
         Float64MultiArray,
         "inertia/covariance",
@@ -127,12 +146,8 @@ def run(args: argparse.Namespace) -> int:
     probe.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
     est = EstimatorNode(
         context=ctx,
-        parameter_overrides=[
-            Parameter("use_sim_time", value=True),
-            Parameter("speed_topic", value="sim/speed"),
-            Parameter("window_s", value=args.window_s),
-            Parameter("qos_depth", value=QUEUE_DEPTH),
-        ],
+        parameter_overrides=[Parameter("use_sim_time", value=True),
+                             *(Parameter(k, value=v) for k, v in estimator_values.items())],
     )
     recorder = None
     if not args.no_record:
@@ -147,17 +162,7 @@ def run(args: argparse.Namespace) -> int:
         )
     sim = SimNode(
         context=ctx,
-        parameter_overrides=[
-            Parameter("time_mode", value="sim"),
-            Parameter("real_time_factor", value=args.real_time_factor),
-            Parameter("duration_s", value=args.duration_s),
-            Parameter("wait_for_subscribers", value=True),
-            Parameter("road.kind", value=args.road),
-            Parameter("road.amplitudes", value=args.amplitudes),
-            Parameter("speed_kmh", value=args.speed_kmh),
-            Parameter("seed", value=args.seed),
-            Parameter("noise_std_mps2", value=args.noise_std_mps2),
-        ],
+        parameter_overrides=[Parameter(k, value=v) for k, v in sim_values.items()],
     )
     nodes = [n for n in (probe, est, recorder) if n is not None]
     for node in nodes:

@@ -90,14 +90,12 @@ class _Watch:
         self.pipeline_ms: dict[str, float] = {}  # update stamp -> the pipeline's own time
         self.inertia: list[tuple[int, float]] = []  # (stamp, arrival wall time)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 10)
-        self.node.create_subscription(
-            InertiaStamped, "inertia",
-            lambda m: self.inertia.append((m.header.stamp.sec * NS + m.header.stamp.nanosec,
-                                           time.monotonic())),
-            10,
-        )
+        self.node.create_subscription(InertiaStamped, "inertia", self._on_inertia, 10)
         self.executor = SingleThreadedExecutor(context=self.ctx)
         self.executor.add_node(self.node)
+
+    def _on_inertia(self, msg: Any) -> None:
+        self.inertia.append((msg.header.stamp.sec * NS + msg.header.stamp.nanosec, time.monotonic()))
 
     def _on_diag(self, msg: Any) -> None:
         for s in msg.status:
