@@ -22,6 +22,7 @@ import yaml
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.parameters import build, check, param, spec_of
+from rozyn_estimator.tolerances import Tolerances
 
 
 @dataclass(frozen=True)
@@ -30,7 +31,7 @@ class Vehicle:
 
     ``sprung_mass_kg``, ``pitch_inertia_kgm2`` and ``cog_from_front_axle_m`` are what
     the estimator identifies; the sim uses them as the truth. Everything else is
-    assumed known to the estimator.
+    assumed known to the estimator, to its ``tolerances``.
     """
 
     PARAM_PREFIX: ClassVar[str] = "vehicle."
@@ -63,6 +64,8 @@ class Vehicle:
     sensor_front_offset_m: float = param(0.0, "front accelerometer behind the front axle", unit="m")
     sensor_rear_offset_m: float = param(0.0, "rear accelerometer behind the rear axle (negative: ahead of "
                                         "it)", unit="m")
+    tolerances: Tolerances = param(description="standard uncertainties of the assumed values",
+                                   default_factory=Tolerances)
 
     def __post_init__(self) -> None:
         check(self, _RULES)
@@ -77,12 +80,15 @@ class Vehicle:
         """(front, rear) sensor positions from the front axle, rearward [m]."""
         return (self.sensor_front_offset_m, self.wheelbase_m + self.sensor_rear_offset_m)
 
-    def replace(self, **changes: float) -> Vehicle:
+    def replace(self, **changes: Any) -> Vehicle:
         """A copy with some fields changed (validated)."""
         return dataclasses.replace(self, **changes)
 
-    def to_dict(self) -> dict[str, float]:
-        return {f.name: float(getattr(self, f.name)) for f in fields(self)}
+    def to_dict(self) -> dict[str, Any]:
+        """The fields (floats) and ``tolerances`` (a mapping), as a vehicle file holds them."""
+        out: dict[str, Any] = {name: float(getattr(self, name)) for name in FIELD_UNITS}
+        out["tolerances"] = self.tolerances.to_dict()
+        return out
 
 
 _RULES = (
@@ -92,24 +98,30 @@ _RULES = (
      "the rear accelerometer must sit at least a quarter wheelbase behind the front one to see pitch "
      "(sensor_front_offset_m is measured from the front axle, sensor_rear_offset_m from the rear one)"),
 )
-FIELD_UNITS: Mapping[str, str] = {f.name: spec_of(f).unit for f in fields(Vehicle)}  # type: ignore[union-attr]
-"""Keys a vehicle YAML may hold, with the unit each value is in."""
+FIELD_UNITS: Mapping[str, str] = {
+    f.name: spec.unit for f in fields(Vehicle) if (spec := spec_of(f)) is not None and f.name != "tolerances"
+}
+"""The numeric keys a vehicle YAML may hold, with the unit each value is in (and ``tolerances``)."""
 
 
 def vehicle_from_mapping(data: Mapping[str, Any], *, source: str = "vehicle") -> Vehicle:
     """Build a Vehicle from a mapping; unknown keys are refused (typos must not pass)."""
     if not isinstance(data, Mapping):
         raise ConfigError(f"{source}: expected a mapping of vehicle parameters, got {type(data).__name__}")
-    unknown = sorted(set(data) - set(FIELD_UNITS))
+    unknown = sorted(str(k) for k in set(data) - {*FIELD_UNITS, "tolerances"})
     if unknown:
         raise ConfigError(
             f"{source}: unknown vehicle parameter(s) {', '.join(unknown)}; "
-            f"known: {', '.join(FIELD_UNITS)}"
+            f"known: {', '.join(FIELD_UNITS)}, tolerances"
         )
+    values = dict(data)
     try:
-        return Vehicle(**data)
+        if "tolerances" in values:
+            values["tolerances"] = Tolerances.from_mapping(values["tolerances"], source)
+        return Vehicle(**values)
     except ConfigError as exc:
-        raise ConfigError(f"{source}: {exc}") from None
+        text = str(exc)
+        raise ConfigError(text if text.startswith(source) else f"{source}: {text}") from None
 
 
 def load_vehicle(path: str | Path) -> Vehicle:
@@ -138,7 +150,7 @@ def _vehicle_section(data: Any, source: str) -> Any:
     """Find the vehicle mapping in a flat file or a ROS 2 params file."""
     if data is None:
         return {}
-    if isinstance(data, Mapping) and not (set(data) & set(FIELD_UNITS)):
+    if isinstance(data, Mapping) and not (set(data) & {*FIELD_UNITS, "tolerances"}):
         for node in data.values():
             params = node.get("ros__parameters") if isinstance(node, Mapping) else None
             if isinstance(params, Mapping) and isinstance(params.get("vehicle"), Mapping):
@@ -151,18 +163,19 @@ def _vehicle_section(data: Any, source: str) -> Any:
 def dump_vehicle(v: Vehicle) -> str:
     """The vehicle as a flat YAML mapping with units as comments."""
     lines = [f"{k}: {getattr(v, k)!r}  # {unit}" for k, unit in FIELD_UNITS.items()]
+    lines.append("tolerances:  # standard uncertainties: shares of the values, or m, or s")
+    lines += [f"  {k}: {value!r}" for k, value in v.tolerances.to_dict().items()]
     return "\n".join(lines) + "\n"
 
 
 
 def vehicle_from_parameters(values: Mapping[str, Any]) -> Vehicle:
-    """The vehicle of a node: ``vehicle_file`` when set, else the ``vehicle.<field>`` values."""
+    """The vehicle of a node: ``vehicle_file`` when set, else the ``vehicle.*`` values (each
+    ``vehicle.tolerances.*`` one overrides its default)."""
     if values.get("vehicle_file"):
         return load_vehicle(values["vehicle_file"])
-    return vehicle_from_mapping(
-        {k.removeprefix("vehicle."): v for k, v in values.items() if k.startswith("vehicle.")},
-        source="parameters",
-    )
+    vehicle: Vehicle = build(Vehicle(), {k: v for k, v in values.items() if k.startswith("vehicle.")})
+    return vehicle
 
 
 def config_from_parameters(default: Any, values: Mapping[str, Any]) -> Any:

@@ -77,3 +77,44 @@ def test_missing_and_broken_files(tmp_path):
     path.write_text("a: [1, 2\n")
     with pytest.raises(ConfigError, match="not valid YAML"):
         load_vehicle(path)
+
+
+def test_tolerances_defaults_file_mapping_and_parameters(tmp_path):
+    from rozyn_estimator.tolerances import KEYS, Tolerances
+    from rozyn_estimator.vehicle import vehicle_from_parameters
+
+    assert Vehicle().tolerances == Tolerances() and Tolerances().any  # the data-sheet defaults
+    assert set(KEYS) == {
+        *(f"{q}_{axle}_{u}" for q, u in (("suspension_stiffness", "npm"), ("suspension_damping", "nspm"),
+                                         ("tyre_stiffness", "npm"), ("tyre_damping", "nspm"))
+          for axle in ("front", "rear")),
+        "unsprung_mass_front_kg", "unsprung_mass_rear_kg", "wheelbase_m", "sensor_front_offset_m",
+        "sensor_rear_offset_m", "sensor_gain_front", "sensor_gain_rear", "sensor_time_offset_s"}
+    path = tmp_path / "car.yaml"
+    path.write_text("wheelbase_m: 2.9\ntolerances: {tyre_stiffness_front_npm: 0.1}\n")
+    listed = load_vehicle(path).tolerances
+    assert listed.tyre_stiffness_front_npm == 0.1 and listed.tyre_stiffness_rear_npm == 0.0  # the rest: exact
+    path.write_text("tolerances: {}\n")
+    assert load_vehicle(path).tolerances == Tolerances.none() and not Tolerances.none().any
+    path.write_text("tolerances: {tyre_stifness_front_npm: 0.1}\n")
+    with pytest.raises(ConfigError, match=r"unknown tolerance.*tyre_stifness_front_npm"):
+        load_vehicle(path)
+    path.write_text("tolerances: {sensor_gain_front: -0.1}\n")
+    with pytest.raises(ConfigError, match=r"vehicle.tolerances.sensor_gain_front: must lie in \[0, 1\]"):
+        load_vehicle(path)
+    # as ROS parameters each overrides its default
+    v = vehicle_from_parameters({"vehicle.tolerances.sensor_time_offset_s": 0.005,
+                                 "vehicle.wheelbase_m": 3.0})
+    assert v.tolerances == Tolerances(sensor_time_offset_s=0.005) and v.wheelbase_m == 3.0
+    assert vehicle_from_mapping(Vehicle().to_dict()) == Vehicle()  # round trip
+
+
+def test_a_bag_recorded_before_tolerances_replays_without_them():
+    import json
+
+    from rozyn_estimator.online import EstimatorConfig
+    from rozyn_estimator.tolerances import Tolerances
+
+    data = json.loads(EstimatorConfig().to_json())
+    del data["vehicle"]["tolerances"]
+    assert EstimatorConfig.from_json(json.dumps(data)).vehicle.tolerances == Tolerances.none()

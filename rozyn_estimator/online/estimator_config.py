@@ -18,6 +18,7 @@ from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.online.config import OnlineConfig
 from rozyn_estimator.parameters import check, param
+from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.vehicle import Vehicle, config_from_parameters
 
 CUSTOM_DATA_KEY = "rozyn_estimator.estimator_config"
@@ -84,6 +85,10 @@ class EstimatorConfig:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
             raise ConfigError(f"estimator configuration is not JSON: {exc}") from None
+        vehicle = data.get("vehicle") if isinstance(data, dict) else None
+        if isinstance(vehicle, dict) and "tolerances" not in vehicle:
+            # recorded before vehicles had tolerances: replay as that estimator ran
+            vehicle["tolerances"] = Tolerances.none().to_dict()
         return _from_dict(cls(), data, "estimator configuration", [] if ignored is None else ignored)
 
 
