@@ -81,6 +81,14 @@ class Tolerances:
     def to_dict(self) -> dict[str, float]:
         return {f.name: float(getattr(self, f.name)) for f in dataclasses.fields(self)}
 
+    def absolute(self, vehicle: Any) -> dict[str, float]:
+        """The non-zero tolerances in the units of their values (N/m, kg, m, share, s)."""
+        out = {}
+        for key, value in self.to_dict().items():
+            if value > 0:
+                out[key] = value * abs(getattr(vehicle, key)) if key in RELATIVE_FIELDS else value
+        return out
+
     @property
     def any(self) -> bool:
         """True when some assumed value carries a tolerance."""

@@ -18,6 +18,7 @@ from rozyn_estimator.method.likelihood import (
     refine,
     window_spectra,
 )
+from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.halfcar import state_space
 from sim_node.road import REFERENCE_CPM, RoadSpec, iso_gd_n0_m3
@@ -27,6 +28,8 @@ from conftest import TRUTH
 
 SPEED = 100 / 3.6
 
+
+EXACT = Vehicle(tolerances=Tolerances.none())  # the fit in-model: every assumed value exactly known
 
 def run(vehicle=None, seed=3, duration_s=100.0, noise=0.05, rate_hz=100.0, **sim):
     v = vehicle or Vehicle()
@@ -112,7 +115,7 @@ def test_window_cut_from_an_endless_run():
     """Not periodic: the taper keeps the front/rear coherence the fit relies on."""
     cfg = SimConfig(road=RoadSpec(amplitudes="gaussian"), seed=8, noise_std_mps2=0.05)
     accel = Simulation(cfg).run(150.0).accel_mps2[3000:]
-    ref = refine(accel, 100.0, Vehicle(), np.array([950.0, 2100.0, 1.25]), SPEED)
+    ref = refine(accel, 100.0, EXACT, np.array([950.0, 2100.0, 1.25]), SPEED)
     assert ref.ok
     assert np.all(np.abs(ref.params - TRUTH) < 4 * np.sqrt(np.diag(ref.covariance)))
 
@@ -151,7 +154,7 @@ def test_delay_characteristic():
 
 def test_refine_recovers_the_truth_from_a_poor_start(window):
     accel, speed = window
-    ref = refine(accel, 100.0, Vehicle(), np.array([800.0, 2600.0, 1.5]), speed)
+    ref = refine(accel, 100.0, EXACT, np.array([800.0, 2600.0, 1.5]), speed)
     assert ref.ok, ref.reason
     assert np.all(np.abs(ref.params / TRUTH - 1) < 0.01)
     std = np.sqrt(np.diag(ref.covariance))
@@ -165,20 +168,20 @@ def test_refine_recovers_the_truth_from_a_poor_start(window):
 @pytest.mark.parametrize("start", [None, np.array([1000.0, 2000.0, 3.5])])
 def test_without_a_usable_start_a_coarse_grid_starts_the_fit(window, start):
     accel, speed = window
-    ref = refine(accel, 100.0, Vehicle(), start, speed)
+    ref = refine(accel, 100.0, EXACT, start, speed)
     assert ref.ok and np.all(np.abs(ref.params / TRUTH - 1) < 0.01)
 
 
 def test_white_noise_is_refused_as_noise():
     noise = np.random.default_rng(0).standard_normal((10_000, 2))
-    ref = refine(noise, 100.0, Vehicle(), TRUTH, SPEED)
+    ref = refine(noise, 100.0, EXACT, TRUTH, SPEED)
     assert ref.status == "failed" and "noise" in ref.reason
 
 
 def test_warm_start_converges_faster_to_the_same_optimum(window):
     accel, speed = window
-    cold = refine(accel, 100.0, Vehicle(), np.array([950.0, 2100.0, 1.25]), speed)
-    warm = refine(accel, 100.0, Vehicle(), np.array([950.0, 2100.0, 1.25]), speed, warm=cold)
+    cold = refine(accel, 100.0, EXACT, np.array([950.0, 2100.0, 1.25]), speed)
+    warm = refine(accel, 100.0, EXACT, np.array([950.0, 2100.0, 1.25]), speed, warm=cold)
     assert cold.ok and warm.ok
     assert np.allclose(warm.params, cold.params, rtol=1e-4)
     assert warm.iterations < cold.iterations
@@ -186,8 +189,8 @@ def test_warm_start_converges_faster_to_the_same_optimum(window):
 
 def test_auto_spectra_only_are_much_less_precise(window):
     accel, speed = window
-    cross = refine(accel, 100.0, Vehicle(), np.array([1000.0, 2000.0, 1.2]), speed)
-    auto = refine(accel, 100.0, Vehicle(), np.array([1000.0, 2000.0, 1.2]), speed,
+    cross = refine(accel, 100.0, EXACT, np.array([1000.0, 2000.0, 1.2]), speed)
+    auto = refine(accel, 100.0, EXACT, np.array([1000.0, 2000.0, 1.2]), speed,
                   METHODS["likelihood-auto"].likelihood)
     assert auto.ok, auto.reason
     assert np.all(np.diag(auto.covariance) > 4 * np.diag(cross.covariance))
@@ -195,7 +198,7 @@ def test_auto_spectra_only_are_much_less_precise(window):
 
 def test_nuisance_suspension_removes_a_stiffness_error(window):
     accel, speed = window
-    told = Vehicle(suspension_stiffness_front_npm=49_500.0, suspension_stiffness_rear_npm=88_000.0)  # +10 %
+    told = EXACT.replace(suspension_stiffness_front_npm=49_500.0, suspension_stiffness_rear_npm=88_000.0)  # +10 %
     start = np.array([1000.0, 2000.0, 1.2])
     fixed = refine(accel, 100.0, told, start, speed)
     free = refine(accel, 100.0, told, start, speed, LikelihoodConfig(estimate_suspension=True))
@@ -217,7 +220,7 @@ def test_nuisance_suspension_removes_a_stiffness_error(window):
 def test_refine_failures_are_statuses(window, args, words):
     accel, _ = window
     start, speed = args.get("start", TRUTH), args.get("speed", SPEED)
-    ref = refine(accel, 100.0, Vehicle(), start, speed, args.get("config"))
+    ref = refine(accel, 100.0, EXACT, start, speed, args.get("config"))
     assert ref.status == "failed" and words in ref.reason and ref.params is None
 
 
@@ -233,9 +236,9 @@ def test_invalid_likelihood_config(changes, field):
 
 def test_pipeline_refines_and_keeps_rozyns_estimate(window):
     accel, speed = window
-    est = estimate(accel, 100.0, Vehicle(), PipelineConfig(), speed_mps=speed)
+    est = estimate(accel, 100.0, EXACT, PipelineConfig(), speed_mps=speed)
     assert est.ok and est.stage == "likelihood" and not est.notes
-    rozyn = estimate(accel, 100.0, Vehicle(), METHODS["rozyn"], speed_mps=speed)
+    rozyn = estimate(accel, 100.0, EXACT, METHODS["rozyn"], speed_mps=speed)
     assert np.allclose(est.rozyn.params, rozyn.params) and est.rozyn_stage is est.rozyn
     assert rozyn.rozyn_stage is rozyn and rozyn.stage == "rozyn"
     assert np.all(np.abs(est.params / TRUTH - 1) < 0.01)
@@ -247,7 +250,7 @@ def test_pipeline_refines_and_keeps_rozyns_estimate(window):
 
 def test_pipeline_falls_back_to_rozyn_with_a_warning(window):
     accel, _ = window
-    est = estimate(accel, 100.0, Vehicle(), PipelineConfig())  # no speed: no wheelbase delay
+    est = estimate(accel, 100.0, EXACT, PipelineConfig())  # no speed: no wheelbase delay
     assert est.ok and est.stage == "rozyn"
     assert np.allclose(est.params, est.rozyn.params)
     assert "publishing the Rozyn estimate" in est.notes[0] and "speed" in est.notes[0]
@@ -256,10 +259,10 @@ def test_pipeline_falls_back_to_rozyn_with_a_warning(window):
 @pytest.mark.parametrize("warm", [True, False])
 def test_the_refinement_stands_in_for_a_failed_rozyn_stage(window, warm):
     accel, speed = window
-    previous = estimate(accel, 100.0, Vehicle(), PipelineConfig(), speed_mps=speed)
+    previous = estimate(accel, 100.0, EXACT, PipelineConfig(), speed_mps=speed)
     # Rozyn's stage finds no body modes in a band where there are none.
     strict = PipelineConfig(freq_band_hz=(5.0, 6.0))
-    est = estimate(accel, 100.0, Vehicle(), strict, speed_mps=speed, warm_start=previous if warm else None)
+    est = estimate(accel, 100.0, EXACT, strict, speed_mps=speed, warm_start=previous if warm else None)
     assert est.ok and est.stage == "likelihood" and est.rozyn.status == "failed"
     assert "Rozyn stage failed" in est.notes[0]
     assert ("previous estimate" if warm else "coarse grid") in est.notes[0]
@@ -268,7 +271,7 @@ def test_the_refinement_stands_in_for_a_failed_rozyn_stage(window, warm):
 
 def test_no_estimate_when_both_stages_fail():
     noise = np.random.default_rng(1).standard_normal((10_000, 2))
-    est = estimate(noise, 100.0, Vehicle(), PipelineConfig(variance="none"), speed_mps=SPEED)
+    est = estimate(noise, 100.0, EXACT, PipelineConfig(variance="none"), speed_mps=SPEED)
     assert est.status == "failed" and est.params is None
     assert "likelihood refinement failed" in est.reason
 
@@ -319,7 +322,7 @@ def test_time_blocks_widen_the_covariance_on_a_non_stationary_road():
         f = []
         for seed in range(8):
             accel, speed = _laplace_run(seed, nu)
-            ref = refine(accel, 100.0, Vehicle(), start, speed)
+            ref = refine(accel, 100.0, EXACT, start, speed)
             assert ref.ok, ref.reason
             assert len(ref.variance_factors) == 3
             f.append(ref.variance_factors)
@@ -333,9 +336,9 @@ def test_block_weight_zero_is_the_model_sandwich(window):
     block_s keeps it too; otherwise the factors scale the variances, correlations kept."""
     accel, speed = window
     start = np.array([950.0, 2100.0, 1.25])
-    model_only = refine(accel, 100.0, Vehicle(), start, speed, LikelihoodConfig(block_weight=0.0))
-    blended = refine(accel, 100.0, Vehicle(), start, speed)
-    few = refine(accel, 100.0, Vehicle(), start, speed, LikelihoodConfig(block_s=20.0))
+    model_only = refine(accel, 100.0, EXACT, start, speed, LikelihoodConfig(block_weight=0.0))
+    blended = refine(accel, 100.0, EXACT, start, speed)
+    few = refine(accel, 100.0, EXACT, start, speed, LikelihoodConfig(block_s=20.0))
     assert model_only.ok and blended.ok and few.ok
     assert model_only.variance_factors == (1.0, 1.0, 1.0) and few.variance_factors == (1.0, 1.0, 1.0)
     assert np.allclose(few.covariance, model_only.covariance)
@@ -348,3 +351,27 @@ def test_block_weight_zero_is_the_model_sandwich(window):
         return c / np.outer(s, s)
 
     assert np.allclose(corr(blended.covariance), corr(model_only.covariance))
+
+
+def test_every_derivative_of_the_model_matches_finite_differences():
+    """dS/dθ of the half-car spectrum with every optional nuisance (corner values, sensor
+    positions, the rear sensor's gain and delay) against central differences of S."""
+    from rozyn_estimator.method.likelihood.model import CORNER_TERMS
+
+    freq = np.linspace(0.5, 15.0, 300)
+    model = HalfCarSpectrum(Vehicle(sensor_front_offset_m=0.2), freq, 100.0, np.full(500, 25.0) +
+                            np.linspace(0, 2, 500), aliases=1, estimate_waviness=True, road_shape_terms=2,
+                            window_weights=np.array([0.25, 0.5, 0.25]), corner_terms=CORNER_TERMS,
+                            sensor_positions=True, calibrate_gain=True, calibrate_time_offset=True)
+    rng = np.random.default_rng(3)
+    theta = model.theta(np.array([1000.0, 2000.0, 1.2]), 1e-4, np.array([1e-6, 2e-6]))
+    theta[6:] += 0.05 * rng.standard_normal(theta.size - 6)
+    S, dS = model.spectrum(theta)
+    for j, name in enumerate(model.names):
+        h = 1e-6 * max(1.0, abs(theta[j]))
+        hi, lo = theta.copy(), theta.copy()
+        hi[j] += h
+        lo[j] -= h
+        fd = (model.spectrum(hi, derivatives=False)[0] - model.spectrum(lo, derivatives=False)[0]) / (2 * h)
+        scale = np.max(np.abs(fd)) + 1e-30
+        assert np.max(np.abs(dS[j] - fd)) < 1e-5 * scale, name

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from rozyn_estimator.method.budget import Budget, Calibration, rozyn_contributions
 from rozyn_estimator.method.config import PARAM_NAMES, PipelineConfig
 from rozyn_estimator.method.correlation import correlation_sums
 from rozyn_estimator.method.fit import axle_shapes, characteristic_matrix, fit_inertia
@@ -60,6 +61,7 @@ class Estimate:
     stage: str = "rozyn"
     rozyn: Estimate | None = None
     refinement: Refinement | None = None
+    budget: Budget | None = None  # the covariance's statistical and systematic parts
 
     @property
     def ok(self) -> bool:
@@ -73,6 +75,12 @@ class Estimate:
     @property
     def std(self) -> np.ndarray | None:
         return None if self.covariance is None else np.sqrt(np.diag(self.covariance))
+
+    @property
+    def statistical_std(self) -> np.ndarray | None:
+        """The std of the statistical part alone (the data's; the tolerances' excluded)."""
+        cov = self.budget.statistical if self.budget is not None else self.covariance
+        return None if cov is None else np.sqrt(np.diag(cov))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (names of ``PARAM_NAMES``; None where there is no number)."""
@@ -95,6 +103,8 @@ class Estimate:
             out["rozyn"]["covariance"] = None if r.covariance is None else r.covariance.tolist()
         if self.refinement is not None:
             out["refinement"] = self.refinement.to_dict()
+        if self.budget is not None:
+            out["budget"] = self.budget.to_dict()
         return out
 
 
@@ -134,7 +144,7 @@ def estimate(
     speed, profile = _speed(speed_mps)
     rozyn, y = _rozyn_stage(np.asarray(accel_mps2), fs_hz, vehicle, cfg, speed, started)
     if cfg.refine == "none" or y is None:
-        return rozyn
+        return _with_budget(rozyn, vehicle, cfg)
     return _refined(rozyn, y, fs_hz, vehicle, cfg, profile, warm_start, started)
 
 
@@ -208,21 +218,26 @@ def _refined(
     if speed is None:
         ref = Refinement(status="failed", reason="the speed is unknown (it sets the wheelbase delay)")
     else:
-        ref = refine(y, fs_hz, vehicle, rozyn.params, speed, cfg.likelihood, warm=warm, start_std=rozyn.std)
+        ref = refine(y, fs_hz, vehicle, rozyn.params, speed, cfg.likelihood, warm=warm,
+                     start_std=rozyn.statistical_std)
     elapsed = (time.perf_counter() - started) * 1e3
     if ref.ok:
         origin = "the previous estimate" if warm is not None else "a coarse grid"
         notes = () if rozyn.ok else (
             f"Rozyn stage failed ({rozyn.reason}); the likelihood fit started from {origin}",
         )
+        budget = _budget(ref.covariance, ref.contributions, ref.calibration)
+        if ref.model_fit is not None and not ref.model_fit.ok:
+            notes = (*notes, f"model check: {ref.model_fit.verdict}")
         return Estimate(
-            status="ok", params=ref.params, covariance=ref.covariance, modes=rozyn.modes, a0=rozyn.a0,
+            status="ok", params=ref.params, covariance=budget.total if budget else ref.covariance,
+            budget=budget, modes=rozyn.modes, a0=rozyn.a0,
             n_samples=n, elapsed_ms=elapsed, notes=notes + ref.notes, stage="likelihood",
             rozyn=rozyn, refinement=ref,
         )
     if rozyn.ok:
         return dataclasses.replace(
-            rozyn, elapsed_ms=elapsed, rozyn=rozyn, refinement=ref,
+            _with_budget(rozyn, vehicle, cfg), elapsed_ms=elapsed, rozyn=rozyn, refinement=ref,
             notes=(f"likelihood refinement failed ({ref.reason}); publishing the Rozyn estimate",
                    *rozyn.notes),
         )
@@ -307,6 +322,14 @@ def _first_or_raise(fits: list[Fit]) -> tuple[np.ndarray, tuple[Mode, ...]]:
     return fits[0]
 
 
+def _budget(statistical: np.ndarray | None, contributions: dict[str, np.ndarray],
+            calibration: tuple[Calibration, ...] = ()) -> Budget | None:
+    """The budget of a stage's estimate (None without a covariance or without tolerances)."""
+    if statistical is None or not (contributions or calibration):
+        return None
+    return Budget(statistical, contributions, calibration)
+
+
 def _done(
     started: float, n: int, v: Vehicle, params: np.ndarray, cov: np.ndarray | None,
     modes: tuple[Mode, ...], notes: tuple[str, ...] = (),
@@ -317,3 +340,16 @@ def _done(
         a0=characteristic_matrix(poles, axle_shapes(v, modes)), n_samples=n,
         elapsed_ms=(time.perf_counter() - started) * 1e3, notes=notes,
     )
+
+
+def _with_budget(rozyn: Estimate, v: Vehicle, cfg: PipelineConfig) -> Estimate:
+    """Rozyn's estimate as published: its covariance with the tolerances' contributions (only
+    when it is the published one: the refinement, when it succeeds, has its own budget)."""
+    tolerances = v.tolerances.absolute(v)
+    if not (rozyn.ok and rozyn.params is not None and tolerances):
+        return rozyn
+    budget = _budget(rozyn.covariance, rozyn_contributions(v, rozyn.modes, rozyn.params, cfg.stiffness_model,
+                                                           cfg.fit, tolerances))
+    if budget is None:
+        return rozyn
+    return dataclasses.replace(rozyn, covariance=budget.total, budget=budget)

@@ -94,7 +94,19 @@ def update_values(update: Update) -> dict[str, str]:
             for name, value, s in zip(PARAM_NAMES, stage.params, std, strict=True):
                 out[f"{prefix}{name}"] = f"{value:.6g}"
                 out[f"{prefix}{name}_std"] = f"{s:.4g}"
+    budget = est.budget
+    if budget is not None:  # the published std's statistical and systematic parts, largest contributors
+        stat, sys = np.sqrt(np.diag(budget.statistical)), np.sqrt(np.diag(budget.systematic))
+        for i, name in enumerate(PARAM_NAMES):
+            out[f"{name}_std_statistical"] = f"{stat[i]:.4g}"
+            out[f"{name}_std_systematic"] = f"{sys[i]:.4g}"
+            out[f"{name}_budget"] = budget.text(i)
+        for c in budget.calibration:
+            out[f"calibrated {c.name}"] = c.text()
     ref = est.refinement
+    if ref is not None and ref.model_fit is not None:
+        out["model_fit_p"] = f"{ref.model_fit.p_value:.3g}"
+        out["model_fit"] = ref.model_fit.verdict
     if ref is not None and ref.ok:
         out["road_waviness"] = f"{ref.waviness:.3f}"
         out["noise_std_front_mps2"] = f"{ref.noise_std_mps2[0]:.4g}"

@@ -31,6 +31,9 @@ class LikelihoodConfig:
     estimate_suspension: bool = param(False, "fit the suspension stiffness and damping (per corner) too")
     estimate_incoherence: bool = param(False, "fit a share of the road part incoherent between the channels")
     second_start: bool = param(True, "guard against wrong basins: a second start, the lower likelihood wins")
+    self_calibrate: bool = param(True, "fit what the data can pin down as nuisances with their tolerances as "
+                                 "priors: suspension stiffness and damping, the rear sensor's gain and delay "
+                                 "relative to the front one")
     max_noise_share: float = param(0.5, "a channel fitted as more noise than this share of its power fails",
                                    low=0.0, open_low=True, high=1.0)
     covariance: str = param("expected", "information in the covariance sandwich: expected or observed",

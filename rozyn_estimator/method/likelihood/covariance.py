@@ -35,10 +35,17 @@ class CovarianceError(Exception):
     """The information at the optimum gives no covariance (the fit fails)."""
 
 
-def sandwich_covariance(objective: WhittleObjective, model: HalfCarSpectrum, theta: np.ndarray,
-                        cfg: LikelihoodConfig, accel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(3, 3) covariance of (m, I, lf) from the information at the optimum, and the factors
-    the time blocks applied to the model sandwich's variances.
+def sandwich_covariance(
+    objective: WhittleObjective, model: HalfCarSpectrum, theta: np.ndarray, cfg: LikelihoodConfig,
+    accel: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """(3, 3) covariance of (m, I, lf) from the data's information at the optimum, the factors
+    the time blocks applied to the model sandwich's variances, and each prior's part.
+
+    With priors (the calibrated values' tolerances) the posterior's covariance is
+    ``H⁻¹ (J + P) H⁻¹``: the data's part ``H⁻¹ J H⁻¹`` (returned) plus, for each parameter
+    ``j`` with a prior, ``c_j c_jᵀ`` with ``c_j = B_j √p_j`` (``B = d(m, I, lf)/dθ H⁻¹``):
+    what that value's tolerance still contributes after the data's calibration, by name.
 
     The score's variance along (m, I, lf) is the weighted mean of two estimates,
     ``(1 - ω) J_model + ω J_blocks`` (``ω = cfg.block_weight``), applied to the sandwich as
@@ -52,6 +59,31 @@ def sandwich_covariance(objective: WhittleObjective, model: HalfCarSpectrum, the
     carried half way. A compromise by construction, not a fit to any seeds.
     """
     info = objective.observed_information(theta) if cfg.covariance == "observed" else objective.fisher(theta)
+    keep = kept(objective, model, theta, info)
+    inv = inverse_information(info[np.ix_(keep, keep)])
+    # Sandwich H⁻¹ J H⁻¹, projected on (m, I, lf) first: B = d(m, I, lf)/dθ H⁻¹.
+    combos = np.zeros((3, theta.size))
+    combos[:, keep] = model.physical_jacobian(theta)[:, keep] @ inv
+    cov = objective.score_covariance(theta, combos)
+    cov = 0.5 * (cov + cov.T)
+    factors = np.ones(3)
+    if cfg.block_weight > 0:
+        blocks = _block_variances(objective, theta, combos, accel, cfg.block_s, cfg.taper)
+        if blocks is not None and np.all(np.diag(cov) > 0):
+            factors = 1.0 + cfg.block_weight * (blocks / np.diag(cov) - 1.0)
+            scale = np.sqrt(factors)
+            cov = scale[:, None] * cov * scale[None, :]
+    parts = {}
+    if objective.prior is not None:  # the prior's share of the posterior's information
+        for j in np.flatnonzero(objective.prior.precision):
+            parts[model.names[j]] = combos[:, j] * math.sqrt(objective.prior.precision[j])
+    return cov, factors, parts
+
+
+def kept(
+    objective: WhittleObjective, model: HalfCarSpectrum, theta: np.ndarray, info: np.ndarray
+) -> np.ndarray:
+    """(n_params,) the parameters the covariance (and the budget) treats as free."""
     # A noise floor far below its channel's power sits at its boundary (zero): the data
     # hold no information on it, so the fit is conditioned on it.
     keep = np.ones(theta.size, dtype=bool)
@@ -66,27 +98,18 @@ def sandwich_covariance(objective: WhittleObjective, model: HalfCarSpectrum, the
             at = int(np.sum(keep[:k]))
             with np.errstate(all="ignore"):
                 keep[k] = bool(np.linalg.pinv(sub)[at, at] < 1.0)  # std of ln(share) < 1
-    info = info[np.ix_(keep, keep)]
+    return keep
+
+
+def inverse_information(info: np.ndarray) -> np.ndarray:
+    """The inverse of a positive-definite information matrix; CovarianceError otherwise."""
     try:
         eig = np.linalg.eigvalsh(info)
         if not (np.all(np.isfinite(eig)) and eig.min() > 1e-12 * eig.max()):
             raise CovarianceError("likelihood fit: the information matrix is not positive definite")
-        inv = np.linalg.inv(info)
+        return np.linalg.inv(info)
     except np.linalg.LinAlgError:
         raise CovarianceError("likelihood fit: singular information matrix") from None
-    # Sandwich H⁻¹ J H⁻¹, projected on (m, I, lf) first: B = d(m, I, lf)/dθ H⁻¹.
-    combos = np.zeros((3, theta.size))
-    combos[:, keep] = model.physical_jacobian(theta)[:, keep] @ inv
-    cov = objective.score_covariance(theta, combos)
-    cov = 0.5 * (cov + cov.T)
-    factors = np.ones(3)
-    if cfg.block_weight > 0:
-        blocks = _block_variances(objective, theta, combos, accel, cfg.block_s, cfg.taper)
-        if blocks is not None and np.all(np.diag(cov) > 0):
-            factors = 1.0 + cfg.block_weight * (blocks / np.diag(cov) - 1.0)
-            scale = np.sqrt(factors)
-            cov = scale[:, None] * cov * scale[None, :]
-    return cov, factors
 
 
 _MIN_BLOCKS = 6  # fewer time blocks than this: too few for a variance (the model's J alone)
@@ -163,8 +186,7 @@ def _score_series(objective: WhittleObjective, theta: np.ndarray, combos: np.nda
     n, fs, d = spectra.n_samples, spectra.fs_hz, spectra.dft
     if d is None:
         raise ValueError("the score's time series needs the window's DFT (Spectra.dft)")
-    S, dS = objective.model.spectrum(theta)
-    S, dS = objective.restrict(S), objective.restrict(dS)
+    S, dS = objective.model_at(theta)
     inv = inv2(S)[0]
     A = inv[None] @ np.tensordot(combos, dS, axes=1) @ inv[None]  # (q, k, 2, 2)
     k0, k = spectra.first_bin, d.shape[0]

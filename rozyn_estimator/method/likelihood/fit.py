@@ -36,11 +36,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import OptimizeResult, minimize
 
+from rozyn_estimator.method.likelihood.calibration import Calibration
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
-from rozyn_estimator.method.likelihood.covariance import CovarianceError, sandwich_covariance
+from rozyn_estimator.method.likelihood.covariance import CovarianceError, kept
+from rozyn_estimator.method.likelihood.fitcheck import ModelFit, model_fit
 from rozyn_estimator.method.likelihood.model import CORNERS, HalfCarSpectrum
 from rozyn_estimator.method.likelihood.objective import WhittleObjective
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, window_spectra
+from rozyn_estimator.method.likelihood.uncertainty import uncertainty
 from rozyn_estimator.vehicle import Vehicle
 
 _MIN_NOISE = 1e-9  # the model's fixed white floor, share of each channel's band power
@@ -65,6 +68,9 @@ class Refinement:
     waviness: float = 2.0
     suspension_scale: tuple[float, ...] = ()  # fitted (k_s f, k_s r, c_s f, c_s r) / nominal
     variance_factors: tuple[float, ...] = ()  # (m, I, lf) variances / the model sandwich's
+    calibration: tuple[Calibration, ...] = ()  # the values the data calibrated
+    model_fit: ModelFit | None = None  # the goodness-of-fit check
+    contributions: dict[str, np.ndarray] = field(default_factory=dict)  # assumed value -> (3,) per 1 u
     elapsed_ms: float = 0.0
     notes: tuple[str, ...] = field(default=())
 
@@ -83,6 +89,10 @@ class Refinement:
         }
         if self.suspension_scale:
             out["suspension_scale"] = list(self.suspension_scale)
+        if self.calibration:
+            out["calibration"] = [c.to_dict() for c in self.calibration]
+        if self.model_fit is not None:
+            out["model_fit"] = self.model_fit.to_dict()
         return out
 
 
@@ -188,25 +198,30 @@ def _refine(
     if best is None or not np.isfinite(best.fun):
         return Refinement(status="failed", reason="likelihood fit: no start gave a finite likelihood")
     theta = best.x
-    params = model.physical(theta)
     notes: list[str] = []
     if not fits.converged:
         notes.append(f"likelihood fit: not converged in {cfg.max_iter} iterations")
     try:
         _check_noise(theta, objective, cfg)
-        cov, factors = sandwich_covariance(objective, model, theta, cfg, y)
-        _check(params, cov, L)
+        found = uncertainty(objective, model, theta, vehicle, cfg, y)
+        _check(found.params, found.covariance, L)
+        # the published model's fit; the calibrated values are held by their priors: they
+        # absorb no misfit, and the check's degrees of freedom are the fit's own
+        n_free = int(kept(objective, model, theta, objective.fisher(theta)).sum())
+        fit = model_fit(found.objective, found.theta, n_free, found.calibration)
     except (_FitError, CovarianceError) as exc:
         return Refinement(status="failed", reason=str(exc), params=None, theta=theta,
                           names=tuple(model.names), iterations=iterations, starts=fits.starts)
     noise = np.sqrt(np.exp(theta[4:6]) * fs)  # two-sided white PSD n -> std sqrt(n fs)
     return Refinement(
-        status="ok", params=params, covariance=cov, theta=theta, names=tuple(model.names),
+        status="ok", params=found.params, covariance=found.covariance, theta=theta, names=tuple(model.names),
         neg_log_likelihood=float(best.fun), iterations=iterations, starts=fits.starts, band_hz=band,
         noise_std_mps2=(float(noise[0]), float(noise[1])),
         waviness=float(theta[model.index["waviness"]]) if cfg.estimate_waviness else 2.0,
-        suspension_scale=tuple(np.exp(theta[-4:]).tolist()) if cfg.estimate_suspension else (),
-        variance_factors=tuple(factors.tolist()), notes=tuple(notes),
+        suspension_scale=tuple(np.exp(theta[model.corner_slice][:4]).tolist()) if cfg.estimate_suspension
+        else (),
+        variance_factors=tuple(found.factors.tolist()), notes=tuple(notes), calibration=found.calibration,
+        contributions=found.contributions, model_fit=fit,
     )
 
 

@@ -37,7 +37,8 @@ floor; useful only on nearly noise-free data, where nothing else limits the cohe
 from __future__ import annotations
 
 import math
-from typing import Literal, overload
+from collections.abc import Sequence
+from typing import Any, Literal, overload
 
 import numpy as np
 from numpy.polynomial import legendre
@@ -45,6 +46,9 @@ from numpy.polynomial import legendre
 from rozyn_estimator.vehicle import Vehicle
 
 CORNERS = ("front", "rear")
+# Corner values θ can hold as log scale factors (``ln_<term>_<corner>``), in θ's order:
+# the suspension's stiffness and damping, the tyre's, the unsprung mass.
+CORNER_TERMS = ("stiffness", "damping", "tyre_stiffness", "tyre_damping", "unsprung_mass")
 _INCOHERENCE_START = 1e-4
 
 
@@ -77,6 +81,15 @@ class HalfCarSpectrum:
         f_ref_hz: reference frequency of the road shape ``|f/f_ref|^(2-w)``.
         estimate_waviness, road_shape_terms, estimate_suspension, estimate_incoherence:
             which nuisance parameters θ holds (see :class:`LikelihoodConfig`).
+        corner_terms: further corner values θ holds as log scale factors (of
+            :data:`CORNER_TERMS`; ``estimate_suspension`` adds the first two).
+        sensor_positions: θ also holds the sensors' positions as departures from the
+            vehicle's (``sensor_front_x_m``, ``sensor_rear_x_m``, metres).
+        calibrate_gain, calibrate_time_offset: θ also holds the rear sensor's gain relative
+            to the front one (``ln_rear_gain``) and its delay behind the front one
+            (``time_offset_ms``): the sensors' self-calibration.
+        shape_edges_hz: the band whose ends the road shape's polynomials span (default:
+            the grid's ends; a coarser grid of the same band passes the band's).
         min_noise_psd: (front, rear) white floor added to the fitted noise [(m/s²)²/Hz]:
             keeps S positive definite when the data are noise-free (θ's noise floor then
             runs to zero and stops mattering).
@@ -87,11 +100,20 @@ class HalfCarSpectrum:
         aliases: int = 1, f_ref_hz: float = 3.0, estimate_waviness: bool = False,
         estimate_suspension: bool = False, min_noise_psd: tuple[float, float] = (0.0, 0.0),
         road_shape_terms: int = 0, estimate_incoherence: bool = False,
-        window_weights: np.ndarray | None = None,
+        window_weights: np.ndarray | None = None, calibrate_gain: bool = False,
+        calibrate_time_offset: bool = False, shape_edges_hz: tuple[float, float] | None = None,
+        corner_terms: tuple[str, ...] = (), sensor_positions: bool = False,
     ) -> None:
-        self.vehicle = vehicle
+        self.freq_hz, self.fs_hz, self.aliases, self.f_ref_hz = freq_hz, fs_hz, aliases, f_ref_hz
+        self._settings: dict[str, Any] = dict(  # what variant() rebuilds the model from
+            vehicle=vehicle, freq_hz=freq_hz, fs_hz=fs_hz, speed_mps=speed_mps, aliases=aliases,
+            f_ref_hz=f_ref_hz, estimate_waviness=estimate_waviness, estimate_suspension=estimate_suspension,
+            min_noise_psd=min_noise_psd, road_shape_terms=road_shape_terms,
+            estimate_incoherence=estimate_incoherence, window_weights=window_weights,
+            calibrate_gain=calibrate_gain, calibrate_time_offset=calibrate_time_offset,
+            shape_edges_hz=shape_edges_hz, corner_terms=corner_terms, sensor_positions=sensor_positions,
+        )
         self.n_freq = freq_hz.size
-        self.wheelbase_m = L = vehicle.wheelbase_m
         # A tapered periodogram's expectation is S smoothed by the taper's spectral window:
         # the model runs on the grid extended by J Fourier bins each side (above 0 Hz).
         c = np.ones(1) if window_weights is None else np.asarray(window_weights, dtype=float)
@@ -108,32 +130,18 @@ class HalfCarSpectrum:
         shifts = np.arange(-aliases, aliases + 1)[:, None] * fs_hz
         f = (grid[None, :] + shifts).ravel()  # (A (k + 2J),) signed
         self.n_alias = 2 * aliases + 1
-        self.omega = w = 2.0 * np.pi * f
+        self.omega = 2.0 * np.pi * f
         self.log_shape = np.log(np.abs(f) / f_ref_hz)  # road shape r = exp((2 - w) log_shape + ...)
         # Legendre polynomials of degree 2.. in log frequency across the band (held at
         # their edge values outside it, e.g. at the aliases): the road's departure from a
         # power law.
-        edges = np.log(np.array([freq_hz.min(), freq_hz.max()]) / f_ref_hz)
+        edges = np.log(np.array(shape_edges_hz or (freq_hz.min(), freq_hz.max())) / f_ref_hz)
         x = np.clip((2.0 * self.log_shape - edges.sum()) / (edges[1] - edges[0]), -1.0, 1.0)
         self.shape_basis = np.array([legendre.legval(x, np.eye(road_shape_terms + 2)[d])
                                      for d in range(2, road_shape_terms + 2)])
-        phi = delay_characteristic(w, L, speed_mps)
-        # Front/rear road velocity covariance R = [[1, φ̄], [φ, 1]] = C Cᴴ, C lower triangular;
-        # at constant speed |φ| = 1 and the second column vanishes.
-        self.inputs = [np.array([np.ones_like(phi), phi])]
-        spread = 1.0 - np.abs(phi) ** 2
-        if np.max(spread) > 1e-12:
-            self.inputs.append(np.array([np.zeros_like(phi), np.sqrt(np.maximum(spread, 0.0))]))
-        x = np.asarray(vehicle.sensor_x_m)
-        self.sensor_map = np.column_stack([1.0 - x / L, x / L])  # P: axle -> sensor heave
-        v = vehicle
-        self.ks0 = np.array([v.suspension_stiffness_front_npm, v.suspension_stiffness_rear_npm])
-        self.cs0 = np.array([v.suspension_damping_front_nspm, v.suspension_damping_rear_nspm])
-        kt = np.array([v.tyre_stiffness_front_npm, v.tyre_stiffness_rear_npm])
-        ct = np.array([v.tyre_damping_front_nspm, v.tyre_damping_rear_nspm])
-        mt = np.array([v.unsprung_mass_front_kg, v.unsprung_mass_rear_kg])
-        self.z_tyre = kt + 1j * w[:, None] * ct  # (A k, 2)
-        self.w_tyre = self.z_tyre - (w * w)[:, None] * mt  # tyre minus wheel inertia
+        self.speed_mps = speed_mps
+        self.rear_factor: np.ndarray | None = None  # assumed rear gain and delay (None: ideal)
+        self.set_vehicle(vehicle)
         self.min_noise_psd = np.asarray(min_noise_psd, dtype=float)
         self.estimate_waviness = estimate_waviness
         self.estimate_suspension = estimate_suspension
@@ -145,10 +153,52 @@ class HalfCarSpectrum:
         first_shape = len(self.names)
         self.names += [f"road_shape_{d}" for d in range(2, road_shape_terms + 2)]
         self.shape_slice = slice(first_shape, first_shape + road_shape_terms)
-        if estimate_suspension:
-            self.names += [f"ln_{q}_{c}" for q in ("stiffness", "damping") for c in CORNERS]
+        wanted = set(corner_terms) | ({"stiffness", "damping"} if estimate_suspension else set())
+        self.corner_terms = tuple(q for q in CORNER_TERMS if q in wanted)
+        first_corner = len(self.names)
+        self.names += [f"ln_{q}_{c}" for q in self.corner_terms for c in CORNERS]
+        self.corner_slice = slice(first_corner, len(self.names))
+        if sensor_positions:
+            self.names += ["sensor_front_x_m", "sensor_rear_x_m"]
+        if calibrate_gain:
+            self.names.append("ln_rear_gain")
+        if calibrate_time_offset:
+            self.names.append("time_offset_ms")
         self.n_params = len(self.names)
         self.index = {name: k for k, name in enumerate(self.names)}
+
+    def variant(self, **changes: Any) -> HalfCarSpectrum:
+        """The same model with some of its construction arguments changed (e.g. more
+        nuisance parameters, another frequency grid)."""
+        return HalfCarSpectrum(**(self._settings | changes))
+
+    def set_vehicle(self, vehicle: Vehicle, rear_gain: float = 1.0, time_offset_s: float = 0.0) -> None:
+        """(Re)compute what depends on the assumed vehicle and sensors: the corners, the
+        sensor positions, the wheelbase delay; ``rear_gain`` and ``time_offset_s`` are the
+        rear sensor's assumed gain relative to the front one and its delay behind it.
+        (The budget perturbs these one at a time.)"""
+        v = vehicle
+        self.vehicle = v
+        self.wheelbase_m = L = v.wheelbase_m
+        w = self.omega
+        phi = delay_characteristic(w, L, self.speed_mps)
+        # Front/rear road velocity covariance R = [[1, φ̄], [φ, 1]] = C Cᴴ, C lower triangular;
+        # at constant speed |φ| = 1 and the second column vanishes.
+        self.inputs = [np.array([np.ones_like(phi), phi])]
+        spread = 1.0 - np.abs(phi) ** 2
+        if np.max(spread) > 1e-12:
+            self.inputs.append(np.array([np.zeros_like(phi), np.sqrt(np.maximum(spread, 0.0))]))
+        x = np.asarray(v.sensor_x_m)
+        self.sensor_map = np.column_stack([1.0 - x / L, x / L])  # P: axle -> sensor heave
+        self.ks0 = np.array([v.suspension_stiffness_front_npm, v.suspension_stiffness_rear_npm])
+        self.cs0 = np.array([v.suspension_damping_front_nspm, v.suspension_damping_rear_nspm])
+        self.kt0 = np.array([v.tyre_stiffness_front_npm, v.tyre_stiffness_rear_npm])
+        self.ct0 = np.array([v.tyre_damping_front_nspm, v.tyre_damping_rear_nspm])
+        self.mt0 = np.array([v.unsprung_mass_front_kg, v.unsprung_mass_rear_kg])
+        self.z_tyre = self.kt0 + 1j * w[:, None] * self.ct0  # (A k, 2)
+        self.w_tyre = self.z_tyre - (w * w)[:, None] * self.mt0  # tyre minus wheel inertia
+        ideal = rear_gain == 1.0 and time_offset_s == 0.0
+        self.rear_factor = None if ideal else rear_gain * np.exp(-1j * w * time_offset_s)
 
     # --- parameters -------------------------------------------------------------------
     def theta(
@@ -163,8 +213,7 @@ class HalfCarSpectrum:
         if self.estimate_waviness:
             th.append(waviness)
         th += [0.0] * self.shape_basis.shape[0]
-        if self.estimate_suspension:
-            th += [0.0] * 4
+        th += [0.0] * (self.n_params - len(th))  # suspension scales, sensor gain and offset: nominal
         return np.array(th)
 
     def physical(self, theta: np.ndarray) -> np.ndarray:
@@ -194,18 +243,21 @@ class HalfCarSpectrum:
     # --- the model ----------------------------------------------------------------------
     @overload
     def spectrum(
-        self, theta: np.ndarray, derivatives: Literal[True] = ..., smooth: Literal[True] = ...
+        self, theta: np.ndarray, derivatives: Literal[True] = ..., smooth: Literal[True] = ...,
+        rows: Sequence[str] | None = ...,
     ) -> tuple[np.ndarray, np.ndarray]: ...
 
     @overload
     def spectrum(
-        self, theta: np.ndarray, derivatives: bool = ..., smooth: bool = ...
+        self, theta: np.ndarray, derivatives: bool = ..., smooth: bool = ..., rows: Sequence[str] | None = ...
     ) -> tuple[np.ndarray, np.ndarray | None]: ...
 
     def spectrum(
-        self, theta: np.ndarray, derivatives: bool = True, smooth: bool = True
+        self, theta: np.ndarray, derivatives: bool = True, smooth: bool = True,
+        rows: Sequence[str] | None = None,
     ) -> tuple[np.ndarray, np.ndarray | None]:
-        """S (k, 2, 2) and, if asked, dS/dθ (n_params, k, 2, 2) (None when not asked).
+        """S (k, 2, 2) and, if asked, dS/dθ (n_params, k, 2, 2) (None when not asked); with
+        ``rows`` only the derivatives by those parameters, in that order.
 
         ``smooth=False``: S on the extended grid (k + 2J), without the taper's smoothing
         (no derivatives).
@@ -217,12 +269,20 @@ class HalfCarSpectrum:
         """
         w = self.omega
         w2 = w * w
-        scale = np.exp(theta[-4:]) if self.estimate_suspension else np.ones(4)
-        ks, cs = self.ks0 * scale[:2], self.cs0 * scale[2:]
+        scale = dict(zip(self.corner_terms, np.exp(theta[self.corner_slice]).reshape(-1, 2), strict=True))
+        ks = self.ks0 * scale["stiffness"] if "stiffness" in scale else self.ks0
+        cs = self.cs0 * scale["damping"] if "damping" in scale else self.cs0
+        zt, wt = self.z_tyre, self.w_tyre
+        if {"tyre_stiffness", "tyre_damping", "unsprung_mass"} & set(scale):
+            kt = self.kt0 * scale.get("tyre_stiffness", 1.0)
+            ct = self.ct0 * scale.get("tyre_damping", 1.0)
+            mt = self.mt0 * scale.get("unsprung_mass", 1.0)
+            zt = kt + 1j * w[:, None] * ct
+            wt = zt - w2[:, None] * mt
         zs = ks + 1j * w[:, None] * cs  # (F, 2) suspension
-        den = zs + self.w_tyre
-        Z = zs * self.w_tyre / den  # condensed corner stiffness
-        T = zs * self.z_tyre / den  # road height -> force on the body
+        den = zs + wt
+        Z = zs * wt / den  # condensed corner stiffness
+        T = zs * zt / den  # road height -> force on the body
         mass, d_mass = self._mass_matrix(theta)
         d11 = Z[:, 0] - w2 * mass[0, 0]  # D = diag(Z) - ω² M_ax (complex symmetric)
         d22 = Z[:, 1] - w2 * mass[1, 1]
@@ -230,6 +290,10 @@ class HalfCarSpectrum:
         det = d11 * d22 - d12 * d12
         H = np.array([[d22, -d12], [-d12, d11]]) / det  # (2, 2, F)
         P = self.sensor_map
+        if "sensor_front_x_m" in self.index:  # the sensors moved by θ's departures
+            k = self.index["sensor_front_x_m"]
+            x_s = np.asarray(self.vehicle.sensor_x_m) + theta[k: k + 2]
+            P = np.column_stack([1.0 - x_s / self.wheelbase_m, x_s / self.wheelbase_m])
         iw = 1j * w
         Q = iw * np.einsum("ab,bcf->acf", P, H)  # iω P H
         exponent = ((2.0 - theta[self.index["waviness"]]) if self.estimate_waviness else 0.0) * self.log_shape
@@ -237,6 +301,12 @@ class HalfCarSpectrum:
         u = [T.T * c for c in self.inputs]  # T ⊙ C_c, each (2, F)
         x = [np.einsum("abf,bf->af", H, uc) for uc in u]
         g = [iw * (P @ xc) for xc in x]
+        rear = self._rear_factor(theta)
+        if rear is not None:  # the rear sensor's gain and delay: a factor on its row of P
+            Q = Q.copy()
+            Q[1] *= rear
+            for gc in g:
+                gc[1] *= rear
         rank = self._outer_sum(g, g, weight)
         if smooth:
             rank = self._smooth(rank)
@@ -249,32 +319,79 @@ class HalfCarSpectrum:
         S[:, 1, 1] += noise[1] + self.min_noise_psd[1]
         if not (derivatives and smooth):
             return S, None
-        road = []  # ∂(rank part) on the extended grid, in the order of θ's road parameters
-        for j in range(3):  # ∂D = -ω² dM: ∂g = ω² Q dM x
-            dg = [w2 * np.einsum("abf,bf->af", Q, d_mass[j] @ xc) for xc in x]
-            road.append(self._hermitian_part(self._outer_sum(dg, g, weight)))
-        if self.estimate_waviness:
-            road.append(self._outer_sum(g, g, -weight * self.log_shape))
-        road += [self._outer_sum(g, g, weight * basis) for basis in self.shape_basis]
-        if self.estimate_suspension:
-            # ∂g = Q (∂T ⊙ C_c - ∂Z ⊙ x_c); ∂Z, ∂T are diagonal, so only corner k's entry.
-            dZ_dzs = (self.w_tyre / den) ** 2
-            dT_dzs = self.z_tyre * self.w_tyre / den**2
-            for dzs in (np.broadcast_to(ks, zs.shape), iw[:, None] * cs):  # ∂z_s/∂ln k_s, ∂ln c_s
+        want = set(self.names if rows is None else rows)
+        road: dict[str, np.ndarray] = {}  # ∂(rank part) on the extended grid, in θ's order
+        for j, name in enumerate(self.names[:3]):  # ∂D = -ω² dM: ∂g = ω² Q dM x
+            if name in want:
+                dg = [w2 * np.einsum("abf,bf->af", Q, d_mass[j] @ xc) for xc in x]
+                road[name] = self._hermitian_part(self._outer_sum(dg, g, weight))
+        if self.estimate_waviness and "waviness" in want:
+            road["waviness"] = self._outer_sum(g, g, -weight * self.log_shape)
+        for name, basis in zip(self.names[self.shape_slice], self.shape_basis, strict=True):
+            if name in want:
+                road[name] = self._outer_sum(g, g, weight * basis)
+        if self.corner_terms:
+            # ∂g = Q (∂T ⊙ C_c - ∂Z ⊙ x_c); ∂Z, ∂T are diagonal, so only corner k's entry. With
+            # Z = z_s W / (z_s + W), T = z_s z_t / (z_s + W), W = z_t - ω² m_t:
+            # ∂Z = (W/d)² ∂z_s + (z_s/d)² ∂W,  ∂T = z_t W/d² ∂z_s + z_s/d ∂z_t - z_s z_t/d² ∂W.
+            dZ_dzs = (wt / den) ** 2
+            dT_dzs = zt * wt / den**2
+            for q in self.corner_terms:
                 for k in range(2):
-                    dZ, dT = dzs[:, k] * dZ_dzs[:, k], dzs[:, k] * dT_dzs[:, k]
+                    name = f"ln_{q}_{CORNERS[k]}"
+                    if name not in want:
+                        continue
+                    if q in ("stiffness", "damping"):  # ∂z_s/∂ln k_s, ∂z_s/∂ln c_s
+                        dzs = ks[k] if q == "stiffness" else iw * cs[k]
+                        dZ, dT = dzs * dZ_dzs[:, k], dzs * dT_dzs[:, k]
+                    else:  # ∂z_t (= ∂W) by ln k_t, ln c_t; ∂W by ln m_t
+                        a = {"tyre_stiffness": self.kt0[k], "tyre_damping": iw * self.ct0[k]}.get(q, 0.0)
+                        factor = scale[q][k]
+                        dzt = a * factor
+                        dW = dzt if q != "unsprung_mass" else -w2 * self.mt0[k] * factor
+                        dZ = (zs[:, k] / den[:, k]) ** 2 * dW
+                        dT = zs[:, k] / den[:, k] * dzt - zs[:, k] * zt[:, k] / den[:, k] ** 2 * dW
                     dg = [Q[:, k] * (dT * c[k] - dZ * xc[k]) for c, xc in zip(self.inputs, x, strict=True)]
-                    road.append(self._hermitian_part(self._outer_sum(dg, g, weight)))
-        dS = np.zeros((self.n_params, self.n_freq, 2, 2), dtype=complex)
-        road_rows = [k for k in range(self.n_params) if k not in (3, 4, 5) and k != k_inc]
-        smoothed = self._smooth(np.stack(road))
-        dS[road_rows] = smoothed + incoherence * self._diagonal(smoothed)
-        dS[3] = S_road
-        dS[4, :, 0, 0] = noise[0]
-        dS[5, :, 1, 1] = noise[1]
-        if k_inc is not None:
-            dS[k_inc] = incoherence * self._diagonal(rank)
+                    road[name] = self._hermitian_part(self._outer_sum(dg, g, weight))
+        zero = np.zeros_like(w)
+        for a, name in enumerate(("sensor_front_x_m", "sensor_rear_x_m")):
+            if name in self.index and name in want:  # ∂g_a/∂x_a = iω [-1/L, 1/L] x (and the rear factor)
+                dP = np.array([-1.0, 1.0]) / self.wheelbase_m
+                factor = rear if a == 1 and rear is not None else 1.0
+                dg = [np.array([iw * (dP @ xc), zero])[:: 1 if a == 0 else -1] * factor for xc in x]
+                road[name] = self._hermitian_part(self._outer_sum(dg, g, weight))
+        if "ln_rear_gain" in self.index and "ln_rear_gain" in want:  # ∂g_r/∂ln(gain) = g_r
+            dg = [np.array([zero, gc[1]]) for gc in g]
+            road["ln_rear_gain"] = self._hermitian_part(self._outer_sum(dg, g, weight))
+        if "time_offset_ms" in self.index and "time_offset_ms" in want:  # ∂g_r/∂τ = -iω g_r (τ in ms)
+            dg = [np.array([zero, -1e-3 * iw * gc[1]]) for gc in g]
+            road["time_offset_ms"] = self._hermitian_part(self._outer_sum(dg, g, weight))
+        out = list(self.names) if rows is None else list(rows)
+        at = {name: i for i, name in enumerate(out)}
+        dS = np.zeros((len(out), self.n_freq, 2, 2), dtype=complex)
+        if road:
+            smoothed = self._smooth(np.stack(list(road.values())))
+            dS[[at[name] for name in road]] = smoothed + incoherence * self._diagonal(smoothed)
+        special = {"ln_road": S_road, "ln_incoherence": incoherence * self._diagonal(rank)}
+        for name, value in special.items():
+            if name in at:
+                dS[at[name]] = value
+        if "ln_noise_front" in at:
+            dS[at["ln_noise_front"], :, 0, 0] = noise[0]
+        if "ln_noise_rear" in at:
+            dS[at["ln_noise_rear"], :, 1, 1] = noise[1]
         return S, dS
+
+    def _rear_factor(self, theta: np.ndarray) -> np.ndarray | None:
+        """The rear sensor's gain and delay as a factor per frequency (None: ideal)."""
+        factor = self.rear_factor
+        if "ln_rear_gain" in self.index:
+            gain = math.exp(theta[self.index["ln_rear_gain"]])
+            factor = np.full(self.omega.shape, gain) if factor is None else factor * gain
+        if "time_offset_ms" in self.index:
+            delay = np.exp(-1e-3j * self.omega * theta[self.index["time_offset_ms"]])
+            factor = delay if factor is None else factor * delay
+        return None if factor is None else np.broadcast_to(factor, self.omega.shape)
 
     def _smooth(self, m: np.ndarray) -> np.ndarray:
         """The taper's spectral window applied along frequency: (..., k + 2J, 2, 2) -> (..., k, 2, 2)."""

@@ -12,11 +12,16 @@ Its Hessian, as the optimiser sees it, is the Fisher information far from the op
 near it, the Fisher information with the exact rows of ``σ²`` and the noise floors (their
 second derivatives are known in closed form); the Newton decrement ``gᵀF⁻¹g`` says how
 close the optimum is. ``spectra="auto"`` uses the auto-spectra only (for comparison).
+
+A :class:`Prior` adds ``½ Σ_j p_j (θ_j - μ_j)²`` to ℓ for the parameters that carry one
+(the sensors' self-calibration: their tolerance is the prior's standard deviation), so ℓ
+is then the negative log posterior and its information ``F + diag(p)``.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -35,20 +40,37 @@ def inv2(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return inv, det
 
 
-def _curvatures(inv: np.ndarray, dS: np.ndarray, SiI: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(Fisher information, the Hessian of ℓ without the terms of ∂²S).
-
-    With ``V_i = S⁻¹ ∂_i S`` and ``M = S⁻¹ I``: Fisher ``Σ_k tr(V_i V_j)``; the Hessian
-    part ``Σ_k tr(V_i V_j M) + tr(V_j V_i M) - tr(V_i V_j)`` (its expectation, at ``M = 1``,
-    is the Fisher information).
-    """
+def _fisher(inv: np.ndarray, dS: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(Fisher information ``Σ_k tr(V_i V_j)``, the ``V_i = S⁻¹ ∂_i S`` it came from)."""
     V = inv[None, :, :, :1] * dS[:, :, None, 0] + inv[None, :, :, 1:] * dS[:, :, None, 1]
     p = V.shape[0]
-    rows = V.reshape(p, -1)
-    fisher = (rows @ V.transpose(0, 1, 3, 2).reshape(p, -1).T).real
+    return (V.reshape(p, -1) @ V.transpose(0, 1, 3, 2).reshape(p, -1).T).real, V
+
+
+def _exact_rows(V: np.ndarray, SiI: np.ndarray, fisher: np.ndarray, rows: slice) -> np.ndarray:
+    """Rows ``rows`` of the Hessian of ℓ without the terms of ∂²S: with ``M = S⁻¹ I``,
+    ``Σ_k tr(V_i V_j M) + tr(V_j V_i M) - tr(V_i V_j)`` (its expectation, at ``M = 1``, is
+    the Fisher information)."""
+    p = V.shape[0]
     VM = V[..., :1] * SiI[None, :, None, 0] + V[..., 1:] * SiI[None, :, None, 1]
-    B = (rows @ VM.transpose(0, 1, 3, 2).reshape(p, -1).T).real
-    return fisher, B + B.T - fisher
+    flat, flat_m = V.reshape(p, -1), VM.transpose(0, 1, 3, 2).reshape(p, -1)
+    B_rows = (flat[rows] @ flat_m.T).real  # B[rows, :]
+    B_cols = (flat @ flat_m[rows].T).real  # B[:, rows]
+    return B_rows + B_cols.T - fisher[rows]
+
+
+@dataclass(frozen=True)
+class Prior:
+    """Independent Gaussian priors on some of θ: mean ``μ`` and precision ``p = 1/σ²`` per
+    parameter (``p = 0``: none)."""
+
+    mean: np.ndarray
+    precision: np.ndarray
+
+    def penalty(self, theta: np.ndarray) -> tuple[float, np.ndarray]:
+        """(½ Σ p (θ - μ)², its gradient)."""
+        d = theta - self.mean
+        return 0.5 * float(np.sum(self.precision * d * d)), self.precision * d
 
 
 def _ridged(m: np.ndarray) -> np.ndarray:
@@ -59,8 +81,10 @@ def _ridged(m: np.ndarray) -> np.ndarray:
 class WhittleObjective:
     """ℓ(θ), its gradient and the Fisher information, with the last evaluation cached."""
 
-    def __init__(self, model: HalfCarSpectrum, spectra: Spectra, spectra_kind: str = "cross") -> None:
+    def __init__(self, model: HalfCarSpectrum, spectra: Spectra, spectra_kind: str = "cross",
+                 prior: Prior | None = None) -> None:
         self.model = model
+        self.prior = prior
         self.auto = spectra_kind == "auto"
         per = spectra.periodogram
         self.periodogram = self.restrict(per)
@@ -70,7 +94,10 @@ class WhittleObjective:
         self._key: bytes | None = None
         self._value: tuple[float, np.ndarray] | None = None
         self._parts: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        self._curv: tuple[np.ndarray, np.ndarray] | None = None
+        self._model: tuple[np.ndarray, np.ndarray] | None = None  # (S, dS) at the cached θ, restricted
+        self._fisher: np.ndarray | None = None
+        self._hess: np.ndarray | None = None
+        self._V: np.ndarray | None = None
 
     def restrict(self, m: np.ndarray) -> np.ndarray:
         """Stacked 2x2 matrices (..., 2, 2) as the fit sees them: unchanged, or for the
@@ -99,7 +126,13 @@ class WhittleObjective:
         if key == self._key and self._value is not None:
             return self._value
         S, dS = self.model.spectrum(theta)
+        return self.seed(theta, S, dS)
+
+    def seed(self, theta: np.ndarray, S: np.ndarray, dS: np.ndarray) -> tuple[float, np.ndarray]:
+        """(ℓ, ∇ℓ) at θ from the model's S and dS/dθ computed elsewhere (cached as :meth:`evaluate`'s)."""
+        key = np.asarray(theta, dtype=float).tobytes()
         S, dS = self.restrict(S), self.restrict(dS)
+        self._model = (S, dS)
         nll, inv, SiI = self._nll(S)
         p = self.model.n_params
         if not math.isfinite(nll):
@@ -107,9 +140,18 @@ class WhittleObjective:
         else:
             W = inv - SiI @ inv  # S⁻¹ - S⁻¹ I S⁻¹
             grad = (dS.reshape(p, -1) @ W.transpose(0, 2, 1).ravel()).real  # Σ_k tr(∂S W)
+            if self.prior is not None:
+                penalty, slope = self.prior.penalty(np.asarray(theta, dtype=float))
+                nll, grad = nll + penalty, grad + slope
             value, self._parts = (nll, grad), (inv, dS, SiI)
-        self._key, self._value, self._curv = key, value, None
+        self._key, self._value, self._fisher, self._hess = key, value, None, None
         return value
+
+    def model_at(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(S, dS/dθ) at θ as the fit sees them (restricted), from the last evaluation if it was at θ."""
+        self.evaluate(theta)
+        assert self._model is not None
+        return self._model
 
     def fun(self, theta: np.ndarray) -> float:
         return self.evaluate(theta)[0]
@@ -117,34 +159,47 @@ class WhittleObjective:
     def jac(self, theta: np.ndarray) -> np.ndarray:
         return self.evaluate(theta)[1]
 
-    def _curvatures(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        _, grad = self.evaluate(theta)
-        if self._curv is None:
+    def fisher(self, theta: np.ndarray) -> np.ndarray:
+        """The Fisher information at θ (the expected Hessian of ℓ, the prior's included)."""
+        self.evaluate(theta)
+        if self._fisher is None:
             if self._parts is None:
-                eye = np.eye(self.model.n_params)
-                self._curv = (eye, eye)
+                self._fisher, self._V = np.eye(self.model.n_params), None
             else:
-                fisher, exact = _curvatures(*self._parts)
+                fisher, self._V = _fisher(self._parts[0], self._parts[1])
+                if self.prior is not None:
+                    fisher = fisher + np.diag(self.prior.precision)
+                self._fisher = fisher
+        return self._fisher
+
+    def _hessian(self, theta: np.ndarray) -> np.ndarray:
+        """The Fisher information with the exact rows of the parameters that scale a part of S."""
+        fisher = self.fisher(theta)
+        _, grad = self.evaluate(theta)
+        if self._hess is None:
+            if self._parts is None or self._V is None:
+                self._hess = fisher
+            else:
                 # The rows of the parameters that scale a part of S (road intensity, noise
                 # floors) are exact: their second derivatives are ∂²S/∂θ_i∂θ_j = ∂S/∂θ_j
                 # (the road intensity with every parameter of the road part, each noise
                 # floor with itself), whose terms are the gradient's. There the Fisher
                 # information can be far off (noise floors are seen at few frequencies);
                 # elsewhere the transfer functions' second derivatives matter and it is good.
+                data = fisher if self.prior is None else fisher - np.diag(self.prior.precision)
+                if self.prior is not None:  # the data's gradient: the prior's slope is not S's
+                    grad = grad - self.prior.penalty(np.asarray(theta, dtype=float))[1]
+                exact = _exact_rows(self._V, self._parts[2], data, slice(3, 6))
                 road = [j for j in range(self.model.n_params) if j not in (4, 5)]
-                exact[3, road] += grad[road]
-                exact[road, 3] += grad[road]
-                exact[3, 3] -= grad[3]
-                exact[4, 4] += grad[4]
-                exact[5, 5] += grad[5]
+                exact[0, road] += grad[road]  # and, by symmetry, the column of the road intensity
+                exact[1, 4] += grad[4]
+                exact[2, 5] += grad[5]
+                if self.prior is not None:
+                    exact = exact + np.diag(self.prior.precision)[3:6]
                 hess = fisher.copy()
-                hess[3:6], hess[:, 3:6] = exact[3:6], exact[:, 3:6]
-                self._curv = (fisher, hess)
-        return self._curv
-
-    def fisher(self, theta: np.ndarray) -> np.ndarray:
-        """The Fisher information at θ (the expected Hessian of ℓ)."""
-        return self._curvatures(theta)[0]
+                hess[3:6], hess[:, 3:6] = exact, exact.T
+                self._hess = hess
+        return self._hess
 
     def decrement(self, theta: np.ndarray) -> float:
         """Newton decrement gᵀF⁻¹g: twice the ℓ a scoring step would still gain."""
@@ -156,8 +211,7 @@ class WhittleObjective:
         nothing about (a noise floor run to zero) stays still: far from the optimum the
         Fisher information (scoring, robust); near it (decrement below ``_NEAR``) with the
         exact rows of the road intensity and noise floors (fast final convergence)."""
-        fisher, hess = self._curvatures(theta)
-        return _ridged(fisher if self.decrement(theta) > _NEAR else hess)
+        return _ridged(self.fisher(theta) if self.decrement(theta) > _NEAR else self._hessian(theta))
 
     def observed_information(self, theta: np.ndarray, step: float = 1e-5) -> np.ndarray:
         """Hessian of ℓ at θ by forward differences of the analytic gradient."""
@@ -180,9 +234,9 @@ class WhittleObjective:
         """
         model = self.model
         S_ext, _ = model.spectrum(theta, derivatives=False, smooth=False)
-        S, dS = model.spectrum(theta)
-        inv = inv2(self.restrict(S))[0]
-        dS = np.tensordot(combos, self.restrict(dS), axes=1)  # (q, k, 2, 2)
+        S, dS = self.model_at(theta)
+        inv = inv2(S)[0]
+        dS = np.tensordot(combos, dS, axes=1)  # (q, k, 2, 2)
         A = inv[None] @ dS @ inv[None]
         half, k = model.half, model.n_freq
         c = np.abs(self.window_dft) ** 2

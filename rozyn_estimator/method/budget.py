@@ -1,0 +1,135 @@
+"""The uncertainty budget of an estimate, as GUM (JCGM 100) has it: a statistical part (the
+data's, type A) and a systematic part (the assumed values', type B) — and which assumed
+values contribute most.
+
+Every assumed value ``β_j`` with a tolerance ``u_j`` (a standard uncertainty, see
+:mod:`rozyn_estimator.tolerances`) moves the estimate by ``c_j = (d(m, I, lf)/dβ_j) u_j``
+when it is one standard uncertainty off; the systematic covariance is ``Σ_j c_j c_jᵀ``
+(the values independent) and the published covariance the sum of both parts. The
+sensitivities are exact derivatives of each stage: of the refinement's optimum
+(:mod:`rozyn_estimator.method.likelihood.sensitivity`) and of Rozyn's linear fit
+(:func:`rozyn_contributions`, central differences of the fit on the measured modes).
+Values the data calibrate themselves (the sensors' relative gain and time offset in the
+refinement) are in its statistical part instead, with their tolerance as prior.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rozyn_estimator.method.config import PARAM_NAMES
+from rozyn_estimator.method.fit import fit_inertia
+from rozyn_estimator.method.identification import IdentificationError, Mode
+from rozyn_estimator.method.likelihood.calibration import Calibration
+from rozyn_estimator.tolerances import RELATIVE_FIELDS
+from rozyn_estimator.vehicle import Vehicle
+
+STATISTICS = "statistics"
+# contributor groups, as a user reads them ("mass std 12 kg: tyre stiffness 9, …")
+GROUPS = {
+    "suspension_stiffness": "suspension stiffness", "suspension_damping": "suspension damping",
+    "tyre_stiffness": "tyre stiffness", "tyre_damping": "tyre damping", "unsprung_mass": "unsprung masses",
+    "wheelbase": "wheelbase", "sensor_front_offset": "sensor positions",
+    "sensor_rear_offset": "sensor positions", "sensor_gain": "sensor gains",
+    "sensor_time_offset": "sensor timing",
+}
+UNITS = ("kg", "kg m2", "m")
+_REL_STEP = 1e-5
+_ABS_STEP = 1e-6
+
+
+def group_of(key: str) -> str:
+    return next(label for prefix, label in GROUPS.items() if key.startswith(prefix))
+
+
+@dataclass(frozen=True)
+class Budget:
+    """The statistical covariance and the systematic contributions of one estimate."""
+
+    statistical: np.ndarray  # (3, 3)
+    contributions: dict[str, np.ndarray] = field(default_factory=dict)  # key -> (3,) shift per 1 u
+    calibration: tuple[Calibration, ...] = ()
+
+    @property
+    def systematic(self) -> np.ndarray:
+        out = np.zeros((3, 3))
+        for c in self.contributions.values():
+            out += np.outer(c, c)
+        return out
+
+    @property
+    def total(self) -> np.ndarray:
+        return self.statistical + self.systematic
+
+    def by_group(self, i: int) -> list[tuple[str, float]]:
+        """(contributor, std) for parameter ``i``, largest first, statistics included."""
+        groups: dict[str, float] = {STATISTICS: float(self.statistical[i, i])}
+        for key, c in self.contributions.items():
+            groups[group_of(key)] = groups.get(group_of(key), 0.0) + float(c[i]) ** 2
+        return sorted(((k, math.sqrt(max(v, 0.0))) for k, v in groups.items()), key=lambda kv: -kv[1])
+
+    def text(self, i: int, shown: int = 3) -> str:
+        """``"tyre stiffness 9, suspension damping 6, statistics 1"`` (the largest few)."""
+        digits = 3 if i < 2 else 2
+        return ", ".join(f"{name} {_short(std, digits)}" for name, std in self.by_group(i)[:shown])
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "statistical": self.statistical.tolist(),
+            "systematic": self.systematic.tolist(),
+            "contributors": {name: dict(self.by_group(i)) for i, name in enumerate(PARAM_NAMES)},
+            "calibration": [c.to_dict() for c in self.calibration],
+        }
+
+
+def _short(x: float, digits: int) -> str:
+    return f"{x:.{digits}g}" if x >= 1e-3 or x == 0 else f"{x:.1e}"
+
+
+def rozyn_contributions(
+    vehicle: Vehicle, modes: Sequence[Mode], params: np.ndarray, model: str, kind: str,
+    tolerances: dict[str, float],
+) -> dict[str, np.ndarray]:
+    """Contributions ``c_j`` of each toleranced value to Rozyn's linear fit (thesis 2-4): the
+    fit repeated on the same measured modes with the value moved a small step.
+
+    The sensors act on the modes: a gain on a channel scales its component of every mode
+    shape; the rear sensor's delay ``τ`` turns its component of a mode with pole ``s`` by
+    ``e^(-sτ)``. The common scale of both gains changes no shape and nothing in the fit.
+    """
+    out = {}
+    for key, u in tolerances.items():
+        h = _REL_STEP * abs(getattr(vehicle, key)) if key in RELATIVE_FIELDS else _ABS_STEP
+        try:
+            moved = _refit(vehicle, modes, model, kind, key, h)
+        except IdentificationError:  # at the edge of the physical range: the stage's own result stands
+            continue
+        out[key] = (moved - params) / h * u  # forward difference: the fit is smooth, h tiny
+    return out
+
+
+def _refit(
+    vehicle: Vehicle, modes: Sequence[Mode], model: str, kind: str, key: str, delta: float
+) -> np.ndarray:
+    if key.startswith("sensor_gain") or key == "sensor_time_offset_s":
+        return fit_inertia(vehicle, [_sensed(m, key, delta) for m in modes], model, kind)
+    moved = dataclasses.replace(vehicle, **{key: getattr(vehicle, key) + delta})
+    return fit_inertia(moved, modes, model, kind)
+
+
+def _sensed(mode: Mode, key: str, delta: float) -> Mode:
+    """The mode as a sensor with ``key`` moved by ``delta`` would have measured it (the
+    estimator then undoes what it assumes: here, the perturbation's inverse)."""
+    front, rear = mode.shape
+    if key == "sensor_gain_front":
+        front = front / (1.0 + delta)
+    elif key == "sensor_gain_rear":
+        rear = rear / (1.0 + delta)
+    else:
+        rear = rear * complex(np.exp(mode.eigenvalue * delta))
+    return Mode(mode.eigenvalue, (front, rear), mode.amplitude)

@@ -1,0 +1,125 @@
+"""Does the half-car model describe the data? A goodness-of-fit check of each refined update.
+
+Whitened spectra. With ``C_k C_kᴴ = S_k`` the fitted model's spectral matrix (the taper's
+smoothing included) and ``d_k`` the window's (tapered, normalised) DFT, the whitened
+``w_k = C_k⁻¹ d_k`` are, under the model, complex Gaussian with identity covariance (NOTES:
+the standardised periodogram is complex Wishart). In each of ``B`` log-spaced bands the
+mean ``M_b = ⟨w wᴴ⟩`` should be the identity; the likelihood-ratio statistic of a complex
+Wishart sample against it,
+
+    T = Σ_b 2 n_b (tr M_b - ln det M_b - 2),
+
+is χ² with ``4 B`` degrees of freedom for independent ordinates, less one for each
+parameter the fit adjusted (they absorb misfit). ``n_b`` counts the band's ordinates
+divided by the taper's correlation of neighbours (``κ = Σ_δ ρ_δ²``). Misfit in a band
+means power or coherence the model cannot produce there: a nonlinear suspension
+(asymmetric dampers, progressive springs: their forces at combination frequencies are
+not driven coherently by the road), a body that rolls or a sensor off the centreline
+(the roll mode's power, incoherent between the channels), a time offset between the
+sensors (the cross-spectrum's phase, growing with frequency).
+
+Calibrated sensors. When the sensors' delay or relative gain are calibrated (their
+tolerance > 0), the fit absorbs them, so the spectra fit — but a calibrated value far
+from the vehicle file's (``|estimate| > 4 std``) is a departure the user should know of,
+and is reported with the cause it names.
+
+Measured here (120 s, 100 km/h, 10 % noise, 8 seeds): T ≈ 22 ± 4 in-model on Gaussian
+roads and 26 ± 5 on Laplace roads (21 degrees of freedom), 127 ± 17 with dampers twice
+as stiff in rebound, ≈ 1900 with the rear sensor 5 ms late.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from rozyn_estimator.method.likelihood.calibration import Calibration
+from rozyn_estimator.method.likelihood.objective import WhittleObjective
+
+N_BANDS = 8
+ALPHA = 1e-3  # a p-value below this: the model does not fit (a WARN)
+Z_DEPARTURE = 4.0  # a calibrated sensor value this many posterior std from nominal: a WARN
+FITS = "fits"
+
+
+@dataclass(frozen=True)
+class ModelFit:
+    """The check's outcome: the statistic, its p-value, the worst band, the verdict."""
+
+    statistic: float
+    dof: int
+    p_value: float
+    worst_band_hz: tuple[float, float]
+    verdict: str  # "fits", or what the data show and its likely cause
+
+    @property
+    def ok(self) -> bool:
+        return self.verdict == FITS
+
+    def to_dict(self) -> dict[str, object]:
+        return {"statistic": self.statistic, "dof": self.dof, "p": self.p_value,
+                "worst_band_hz": list(self.worst_band_hz), "verdict": self.verdict}
+
+
+def model_fit(objective: WhittleObjective, theta: np.ndarray, n_free: int,
+              calibration: tuple[Calibration, ...] = ()) -> ModelFit:
+    """The check at the fit's optimum ``theta`` (``n_free``: the parameters it adjusted)."""
+    spectra = objective.spectra
+    if spectra.dft is None:
+        raise ValueError("the model-fit check needs the window's DFT (Spectra.dft)")
+    S, _ = objective.model.spectrum(theta, derivatives=False)  # the full model, also for an auto fit
+    d = spectra.dft / math.sqrt(spectra.n_samples * spectra.fs_hz)
+    w = np.linalg.solve(np.linalg.cholesky(S), d[..., None])[..., 0]
+    f = spectra.freq_hz
+    edges = np.geomspace(f[0], f[-1] * (1 + 1e-9), N_BANDS + 1)
+    kappa = _neighbour_correlation(spectra.window_dft)
+    per_band, cross_share = [], []
+    for lo, hi in itertools.pairwise(edges):
+        sel = (f >= lo) & (f < hi)
+        n = int(sel.sum())
+        M = np.einsum("ka,kb->ab", w[sel], w[sel].conj()) / max(n, 1)
+        auto = M[0, 0].real - math.log(M[0, 0].real) + M[1, 1].real - math.log(M[1, 1].real) - 2
+        full = float(np.trace(M).real - math.log(max(np.linalg.det(M).real, 1e-300)) - 2)
+        per_band.append(2.0 * n / kappa * full)
+        cross_share.append(1.0 - auto / full if full > 0 else 0.0)
+    statistic = float(np.sum(per_band))
+    dof = max(1, 4 * N_BANDS - n_free)
+    p = float(stats.chi2.sf(statistic, dof))
+    worst = int(np.argmax(per_band))
+    band = (float(edges[worst]), float(min(edges[worst + 1], f[-1])))
+    return ModelFit(statistic, dof, p, band, _verdict(p, band, per_band, cross_share, calibration))
+
+
+def _verdict(p: float, band: tuple[float, float], per_band: list[float], cross_share: list[float],
+             calibration: tuple[Calibration, ...]) -> str:
+    causes = []
+    for c in calibration:
+        if c.name in ("sensor_time_offset_s", "sensor_gain_ratio") and abs(c.estimate) > Z_DEPARTURE * c.std:
+            if c.name == "sensor_time_offset_s":
+                causes.append(f"sensor timing: the rear sensor lags the front one by {c.estimate * 1e3:.2f} "
+                              f"± {c.std * 1e3:.2f} ms (calibrated; check the sensors' clocks)")
+            else:
+                causes.append(f"sensor gain: the rear sensor reads {c.estimate * 100:+.1f} ± "
+                              f"{c.std * 100:.1f} % relative to the front one (calibrated; check their "
+                              "scale factors)")
+    if p < ALPHA:
+        text = (f"the half-car model does not fit the spectra (p = {p:.1g}; worst "
+                f"{band[0]:.2g}-{band[1]:.2g} Hz)")
+        high = per_band[N_BANDS // 2:]
+        timing = np.mean(cross_share) > 0.5 and sum(high) > 2 * sum(per_band[: N_BANDS // 2])
+        likely = ("sensor timing (a time offset between the sensors) or their positions" if timing else
+                  "a nonlinear suspension (dampers stiffer in rebound, progressive springs), or a body that "
+                  "rolls with a sensor off the centreline (use the full-vehicle model)")
+        causes.append(f"{text}: likely {likely}")
+    return "; ".join(causes) if causes else FITS
+
+
+def _neighbour_correlation(window_dft: np.ndarray) -> float:
+    """κ = Σ_δ ρ_δ²: how many ordinates one independent one is worth under the taper."""
+    w = window_dft / math.sqrt(float(np.sum(np.abs(window_dft) ** 2)))
+    rho = np.array([abs(np.sum(w[: w.size - k] * np.conj(w[k:]))) ** 2 for k in range(w.size)])
+    return float(rho[0] + 2.0 * rho[1:].sum())
