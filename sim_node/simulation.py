@@ -1,8 +1,10 @@
 """A streaming simulation run: road + speed profile + half car + accelerometers.
 
 ``Simulation.next_block(n)`` returns the next ``n`` accelerometer samples; the state of
-the plant, the distance travelled and the noise stream carry over, so a run cut into
-blocks equals the same run made at once and memory stays bounded however long it runs.
+the plant, the distance travelled, the sensors' filters and the noise stream carry over,
+so a run cut into blocks equals the same run made at once and memory stays bounded
+however long it runs. ``SimConfig.departures`` makes the plant and the sensors depart
+from the estimator's model (:mod:`sim_node.departures`); by default they do not.
 """
 
 from __future__ import annotations
@@ -15,10 +17,11 @@ import numpy as np
 
 from rozyn_estimator.parameters import check, param
 from rozyn_estimator.vehicle import Vehicle
+from sim_node.departures import Departures
 from sim_node.halfcar import N_DOF, N_STATE, HalfCarPlant, static_state
 from sim_node.road import Road, RoadSpec
+from sim_node.sensors import GRAVITY_MPS2, Accelerometers
 
-GRAVITY_MPS2 = 9.80665
 # Thesis' free-decay start (main listing): wheels -0.015 m, body -0.03 m, no pitch.
 THESIS_FREE_DECAY_STATE = (-0.015, -0.015, -0.03, 0.0, 0.0, 0.0, 0.0, 0.0)
 
@@ -53,12 +56,16 @@ class SimConfig:
     duration_s: float = param(0.0, "simulated time to run; 0: forever (a finite run's road period is its "
                               "distance)", unit="s", low=0.0, high=1e9, read_only=True)
     initial_state: tuple[float, ...] | None = None  # free decay start; flat roads only
+    departures: Departures = param(description="departures from the estimator's model (departures.* "
+                                   "parameters)", default_factory=Departures)
 
     def __post_init__(self) -> None:
         check(self, (
             ("speed_variation", lambda c: c.speed_variation < 1.0, "must lie in [0, 1)"),
             ("initial_state", lambda c: c.initial_state is None or len(c.initial_state) == N_STATE,
              f"expected {N_STATE} numbers"),
+            ("departures", lambda c: c.departures.lowpass_hz < 0.5 * c.rate_hz * c.oversample,
+             "lowpass_hz must stay below the plant's Nyquist frequency, rate_hz * oversample / 2"),
         ))
 
     @property
@@ -101,7 +108,10 @@ class Simulation:
             x0 = np.asarray(THESIS_FREE_DECAY_STATE)
         else:
             x0 = static_state(cfg.vehicle, u0)
-        self.plant = HalfCarPlant(cfg.vehicle, self._dt, x0=x0, u0=u0)
+        self.plant = HalfCarPlant(cfg.vehicle, self._dt, x0=x0, u0=u0,
+                                  suspension=cfg.departures.suspension(cfg.vehicle),
+                                  delays_s=cfg.departures.delays_s)
+        self.sensors = Accelerometers(cfg.departures, 1.0 / self._dt, cfg.bias_mps2, cfg.include_gravity)
         if self._step < 0:
             self._advance(-self._step)
 
@@ -134,8 +144,9 @@ class Simulation:
         )
 
     def _advance(self, n_steps: int) -> np.ndarray:
+        """The body's acceleration at the sensors over the next plant steps, low-passed."""
         steps = self._step + np.arange(n_steps)
-        accel = self.plant.run(self._road_at(steps))
+        accel = self.sensors.lowpass(self.plant.run(self._road_at(steps)))
         self._step += n_steps
         return accel
 
@@ -145,10 +156,7 @@ class Simulation:
         if n < 0:
             raise ValueError(f"n must be >= 0, got {n}")
         t = self.time_s + np.arange(n) / cfg.rate_hz
-        accel = self._advance(n * cfg.oversample)[:: cfg.oversample]
-        accel = accel + np.asarray(cfg.bias_mps2)
-        if cfg.include_gravity:
-            accel = accel + GRAVITY_MPS2
+        accel = self.sensors.read(self._advance(n * cfg.oversample)[:: cfg.oversample])
         if cfg.noise_std_mps2 > 0:
             accel = accel + cfg.noise_std_mps2 * self._noise.standard_normal((n, 2))
         return SimBlock(t_s=t, accel_mps2=accel, speed_mps=self.speed_at(t))

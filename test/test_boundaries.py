@@ -31,7 +31,8 @@ RULES: dict[str, tuple[set[str], bool]] = {
     f"{PKG}.tools": ({PKG, "sim_node"}, True),
     "sim_node": (SHARED | {f"{PKG}.ros.glue"}, True),
 }
-ROS_FREE_SIM = {"sim_node.halfcar", "sim_node.road", "sim_node.simulation"}
+ROS_FREE_SIM = {"sim_node.halfcar", "sim_node.road", "sim_node.simulation", "sim_node.departures",
+                "sim_node.sensors", "sim_node.fixed_point"}
 
 
 def _modules() -> dict[str, Path]:

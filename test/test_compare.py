@@ -10,7 +10,8 @@ import pytest
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.tools.cli import main
-from rozyn_estimator.tools.compare import SECOND_VEHICLE, SUITES, Bars, bar_failures, compare, suite
+from rozyn_estimator.tools.compare import bar_failures, compare
+from rozyn_estimator.tools.suites import SECOND_VEHICLE, SUITES, Bars, suite
 from rozyn_estimator.tools.trial import Summary, TrialSpec, summarise
 
 QUICK = ["--seeds", "1-2", "--jobs", "1", "--duration-s", "40", "--quiet"]

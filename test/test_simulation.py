@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.errors import ConfigError
+from sim_node.departures import Departures
 from sim_node.road import RoadSpec
 from sim_node.simulation import GRAVITY_MPS2, SimConfig, Simulation
 
@@ -57,11 +58,22 @@ def test_free_decay_starts_displaced_and_decays():
 @pytest.mark.parametrize(
     ("changes", "field"),
     [({"speed_kmh": 0.0}, "speed_kmh"), ({"rate_hz": -1.0}, "rate_hz"),
-     ({"noise_std_mps2": -0.1}, "noise_std_mps2"), ({"initial_state": (0.0,)}, "initial_state")],
+     ({"noise_std_mps2": -0.1}, "noise_std_mps2"), ({"initial_state": (0.0,)}, "initial_state"),
+     ({"departures": {"damper_ratio": 2.0}}, "departures: expected Departures settings")],
 )
 def test_invalid_config(changes, field):
     with pytest.raises(ConfigError, match=field):
         SimConfig(**changes)
+
+
+def test_departures_reach_the_plant_and_the_sensors():
+    departures = Departures(damper_ratio=2.0, time_offset_s=0.01, lowpass_hz=30.0)
+    sim = Simulation(SimConfig(duration_s=10.0, departures=departures))
+    sim.run(1.0)
+    assert sim.plant.iterations > 1 and [d.channel for d in sim.plant._delayed] == [1]
+    assert sim.sensors._sos is not None
+    plain = Simulation(SimConfig(duration_s=10.0))
+    assert plain.plant.iterations == 0 and not plain.plant._delayed and plain.sensors._sos is None
 
 
 def test_oversampling_picks_the_plant_rate():

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.tools.trial import TrialSpec, estimate_block, run_trials, simulate, summarise
 from rozyn_estimator.vehicle import Vehicle
 
@@ -55,7 +56,11 @@ def test_a_stiffness_error_moves_the_estimate():
                                                  ({"method": "nope"}, "method: must be one of"),
                                                  ({"duration_s": 0.0}, "duration_s: must be > 0 s"),
                                                  ({"damping_error": 10.0}, r"damping_error: .* \(-1, 10\)"),
-                                                 ({"periodic": 1}, "periodic: expected true or false")])
+                                                 ({"periodic": 1}, "periodic: expected true or false"),
+                                                 ({"tyre_stiffness_error": -1.0}, "tyre_stiffness_error"),
+                                                 ({"unsprung_mass_error": 10.0}, "unsprung_mass_error"),
+                                                 ({"tyre_damping_error": float("nan")}, "tyre_damping_error"),
+                                                 ({"departures": None}, "departures: expected Departures")])
 def test_invalid_trial_options(changes, field):
     with pytest.raises(ConfigError, match=field):
         TrialSpec(**changes)
@@ -69,7 +74,10 @@ def test_free_decay_trial_skips_the_refinement():
 
 
 def test_summary_reports_coverage():
-    s = summarise(run_trials(TrialSpec(method="likelihood", noise_fraction=0.1, **SHORT), [1, 2, 3], jobs=1))
+    """The statistical std (a vehicle known exactly: no tolerance budget on top)."""
+    exact = Vehicle(tolerances=Tolerances.none())
+    spec = TrialSpec(method="likelihood", noise_fraction=0.1, vehicle=exact, **SHORT)
+    s = summarise(run_trials(spec, [1, 2, 3], jobs=1))
     assert s.failures == 0
     assert np.all((s.coverage_95 >= 0) & (s.coverage_95 <= 1))
     assert np.all(s.mean_reported_std < np.array([10.0, 25.0, 0.01]))

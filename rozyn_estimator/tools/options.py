@@ -1,12 +1,14 @@
 """Command-line options shared by the tools that simulate runs (``rozyn trial``, ``rozyn compare``).
 
-Only argparse here: the commands that use these options import the simulator themselves.
+Only argparse here: the commands that use these options import the simulator themselves
+(the ``*_values`` helpers return keyword arguments for its classes).
 """
 
 from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
+from typing import Any
 
 
 def add_run_options(p: argparse.ArgumentParser, roads: Sequence[str], amplitudes: str) -> None:
@@ -27,3 +29,60 @@ def add_run_options(p: argparse.ArgumentParser, roads: Sequence[str], amplitudes
 def add_vehicle_option(p: argparse.ArgumentParser) -> None:
     """``--vehicle FILE.yaml``: the vehicle's parameters (default: the thesis' Table 5-1)."""
     p.add_argument("--vehicle", metavar="FILE.yaml", help="vehicle parameters (default: thesis Table 5-1)")
+
+
+def add_departure_options(p: argparse.ArgumentParser) -> None:
+    """The simulated vehicle's departures from the estimator's model (``sim_node.departures``);
+    the defaults are the exact half car with ideal, synchronised sensors."""
+    g = p.add_argument_group("departures of the simulated vehicle from the estimator's model (the "
+                             "estimator is not told)")
+    g.add_argument("--damper-ratio", type=float, default=1.0, metavar="R",
+                   help="dampers R times stiffer in rebound (the suspension extending) than in compression, "
+                        "at the vehicle's mean damping (c_r + c_c)/2 (default: 1, linear)")
+    g.add_argument("--spring-progression", type=float, default=0.0, metavar="P",
+                   help="progressive springs F = k e (1 + P (e/E)^2), e the deflection from the ride "
+                        "height [m]: the force P x 100 %% above the linear spring's at e = E "
+                        "(default: 0, linear)")
+    g.add_argument("--spring-reference-m", type=float, default=0.05, metavar="E",
+                   help="E of --spring-progression [m] (default: 0.05)")
+    g.add_argument("--gain-error", type=float, nargs=2, default=(0.0, 0.0), metavar=("FRONT", "REAR"),
+                   help="accelerometer scale factor errors, shares: 0.03 reads 3 %% high (default: 0 0)")
+    g.add_argument("--time-offset-s", type=float, default=0.0, metavar="TAU",
+                   help="the rear accelerometer is TAU s late: its sample stamped t holds the specific "
+                        "force at t - TAU; negative: the front one is late (default: 0)")
+    g.add_argument("--lowpass-hz", type=float, default=0.0, metavar="F",
+                   help="a 2nd-order Butterworth low-pass at F Hz in both accelerometers (default: 0, none)")
+
+
+def departure_values(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``Departures`` fields the options of :func:`add_departure_options` give."""
+    return {
+        "damper_ratio": args.damper_ratio, "spring_progression": args.spring_progression,
+        "spring_reference_m": args.spring_reference_m, "gain_error_front": args.gain_error[0],
+        "gain_error_rear": args.gain_error[1], "time_offset_s": args.time_offset_s,
+        "lowpass_hz": args.lowpass_hz,
+    }
+
+
+VEHICLE_ERROR_OPTIONS = {  # option -> (TrialSpec field, what the estimator is told wrong)
+    "--stiffness-error": ("stiffness_error", "suspension stiffness"),
+    "--damping-error": ("damping_error", "suspension damping"),
+    "--tyre-stiffness-error": ("tyre_stiffness_error", "tyre stiffness"),
+    "--tyre-damping-error": ("tyre_damping_error", "tyre damping"),
+    "--unsprung-mass-error": ("unsprung_mass_error", "unsprung masses"),
+}
+
+
+def add_vehicle_error_options(p: argparse.ArgumentParser) -> None:
+    """Wrong vehicle values told to the estimator (``TrialSpec``'s ``*_error`` fields)."""
+    g = p.add_argument_group("wrong vehicle values told to the estimator (the simulated vehicle stays "
+                             "the vehicle file's)")
+    for option, (_, what) in VEHICLE_ERROR_OPTIONS.items():
+        g.add_argument(option, type=float, default=0.0, metavar="SHARE",
+                       help=f"the estimator is told the {what} times (1 + SHARE), both axles: 0.1 is "
+                            "10 %% high, -0.1 10 %% low (default: 0)")
+
+
+def vehicle_error_values(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``TrialSpec`` ``*_error`` fields the options of :func:`add_vehicle_error_options` give."""
+    return {field: getattr(args, field) for field, _ in VEHICLE_ERROR_OPTIONS.values()}

@@ -21,10 +21,24 @@ from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS, PARAM_NAMES, Estimate, PipelineConfig, estimate
 from rozyn_estimator.parameters import check, param
 from rozyn_estimator.vehicle import Vehicle
+from sim_node.departures import Departures
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimBlock, SimConfig, Simulation
 
 TRIAL_ROADS = ("iso", "laplace", "free-decay")
+# The estimator's wrong vehicle values: TrialSpec field -> the Vehicle fields it scales by
+# (1 + error), both axles. The simulated vehicle stays the true one.
+VEHICLE_ERRORS: dict[str, tuple[str, str]] = {
+    "stiffness_error": ("suspension_stiffness_front_npm", "suspension_stiffness_rear_npm"),
+    "damping_error": ("suspension_damping_front_nspm", "suspension_damping_rear_nspm"),
+    "tyre_stiffness_error": ("tyre_stiffness_front_npm", "tyre_stiffness_rear_npm"),
+    "tyre_damping_error": ("tyre_damping_front_nspm", "tyre_damping_rear_nspm"),
+    "unsprung_mass_error": ("unsprung_mass_front_kg", "unsprung_mass_rear_kg"),
+}
+
+
+def _told(what: str) -> str:
+    return f"the estimator is told the {what} * (1 + error), both axles; in (-1, 10)"
 
 
 @dataclass(frozen=True)
@@ -32,9 +46,13 @@ class TrialSpec:
     """The conditions of a trial; the seed picks the road.
 
     Checked here: every field's type, and the trial's own rules (road, method, duration,
-    relative noise, suspension errors); errors name the field. The ranges of the road and
-    sensor settings are the simulator's (:class:`SimConfig`, :class:`RoadSpec`), checked as
-    this spec's ``sim_config``.
+    relative noise, the estimator's vehicle errors); errors name the field. The ranges of
+    the road, sensor and departure settings are the simulator's (:class:`SimConfig`,
+    :class:`RoadSpec`, :class:`Departures`), checked as this spec's ``sim_config``.
+
+    Two ways to depart from the estimator's model: ``departures`` change the simulated
+    plant and sensors (the estimator is not told), the ``*_error`` fields change what the
+    estimator is told of the vehicle (the simulated one stays true).
     """
 
     road: str = param("iso", "road model", choices=TRIAL_ROADS)
@@ -54,19 +72,25 @@ class TrialSpec:
     speed_period_s: float = param(60.0, "period of the speed change", unit="s")
     periodic: bool = param(True, "road period = the record's distance (thesis eq 4-7); false: endless road")
     vehicle: Vehicle = param(description="the true vehicle", default_factory=Vehicle)
-    stiffness_error: float = param(0.0, "the estimator is told k_s * (1 + error), both axles; in (-1, 10)")
-    damping_error: float = param(0.0, "the estimator is told c_s * (1 + error), both axles; in (-1, 10)")
+    departures: Departures = param(description="the simulated plant's and sensors' departures from the "
+                                   "estimator's model", default_factory=Departures)
+    stiffness_error: float = param(0.0, _told("suspension stiffness k_s"))
+    damping_error: float = param(0.0, _told("suspension damping c_s"))
+    tyre_stiffness_error: float = param(0.0, _told("tyre stiffness k_t"))
+    tyre_damping_error: float = param(0.0, _told("tyre damping c_t"))
+    unsprung_mass_error: float = param(0.0, _told("unsprung mass m_t"))
     method: str = param("rozyn", "estimation method", choices=tuple(METHODS))
     pipeline: PipelineConfig | None = None  # overrides the method's settings
 
     def __post_init__(self) -> None:
+        errors = tuple((name, lambda t, n=name: -1.0 < getattr(t, n) < 10.0, "must lie in (-1, 10)")
+                       for name in VEHICLE_ERRORS)
         check(self, (
-            ("stiffness_error", lambda t: -1.0 < t.stiffness_error < 10.0, "must lie in (-1, 10)"),
-            ("damping_error", lambda t: -1.0 < t.damping_error < 10.0, "must lie in (-1, 10)"),
+            *errors,
             ("pipeline", lambda t: t.pipeline is None or isinstance(t.pipeline, PipelineConfig),
              "expected PipelineConfig settings or None"),
         ))
-        self.sim_config(0)  # validates road and sim settings
+        self.sim_config(0)  # validates road, sim and departure settings
 
     def sim_config(self, seed: int) -> SimConfig:
         if self.road == "free-decay":
@@ -80,7 +104,7 @@ class TrialSpec:
             vehicle=self.vehicle, road=road, seed=seed, speed_kmh=self.speed_kmh,
             speed_variation=self.speed_variation, speed_period_s=self.speed_period_s,
             rate_hz=self.rate_hz, noise_std_mps2=self.noise_std_mps2, bias_mps2=self.bias_mps2,
-            duration_s=self.duration_s if self.periodic else 0.0,
+            duration_s=self.duration_s if self.periodic else 0.0, departures=self.departures,
         )
 
     def pipeline_config(self, method: str | None = None) -> PipelineConfig:
@@ -97,16 +121,11 @@ class TrialSpec:
 
     @property
     def estimator_vehicle(self) -> Vehicle:
-        """The vehicle the estimator is told: the true one with the suspension errors applied."""
-        v, k, c = self.vehicle, 1.0 + self.stiffness_error, 1.0 + self.damping_error
-        if k == 1.0 and c == 1.0:
-            return v
-        return v.replace(
-            suspension_stiffness_front_npm=v.suspension_stiffness_front_npm * k,
-            suspension_stiffness_rear_npm=v.suspension_stiffness_rear_npm * k,
-            suspension_damping_front_nspm=v.suspension_damping_front_nspm * c,
-            suspension_damping_rear_nspm=v.suspension_damping_rear_nspm * c,
-        )
+        """The vehicle the estimator is told: the true one with the ``*_error`` fields applied."""
+        v = self.vehicle
+        changes = {name: getattr(v, name) * (1.0 + error) for key, names in VEHICLE_ERRORS.items()
+                   if (error := getattr(self, key)) != 0.0 for name in names}
+        return v.replace(**changes) if changes else v
 
     def replace(self, **changes: Any) -> TrialSpec:
         return dataclasses.replace(self, **changes)
@@ -241,6 +260,8 @@ class Summary:
     mean_reported_std: np.ndarray  # NaN when no covariance was reported
     median_ms: float
     coverage_95: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))  # truth within ±1.96 std
+    rms_error: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))  # √mean (estimate - truth)²
+    model_warn_share: float = float("nan")  # refined estimates whose model-fit check warned
 
 
 def summarise(results: Iterable[TrialResult]) -> Summary:
@@ -264,4 +285,12 @@ def summarise(results: Iterable[TrialResult]) -> Summary:
         median_ms=float(np.median([r.estimate.elapsed_ms for r in ok])),
         coverage_95=np.mean(np.abs(p - truth) <= 1.96 * stds, axis=0) if np.all(np.isfinite(stds)) else
         np.full(3, np.nan),
+        rms_error=np.sqrt(np.mean((p - truth) ** 2, axis=0)),
+        model_warn_share=_model_warn_share(ok),
     )
+
+
+def _model_warn_share(ok: list[TrialResult]) -> float:
+    fits = [r.estimate.refinement.model_fit for r in ok
+            if r.estimate.refinement is not None and r.estimate.refinement.model_fit is not None]
+    return float(np.mean([not f.ok for f in fits])) if fits else float("nan")

@@ -13,9 +13,17 @@ import sys
 from collections.abc import Sequence
 
 from rozyn_estimator.method import METHODS
-from rozyn_estimator.tools.options import add_run_options, add_vehicle_option
+from rozyn_estimator.tools.options import (
+    add_departure_options,
+    add_run_options,
+    add_vehicle_error_options,
+    add_vehicle_option,
+    departure_values,
+    vehicle_error_values,
+)
 from rozyn_estimator.tools.trial import (
     TRIAL_ROADS,
+    VEHICLE_ERRORS,
     TrialResult,
     TrialSpec,
     parse_seeds,
@@ -23,6 +31,7 @@ from rozyn_estimator.tools.trial import (
     summarise,
 )
 from rozyn_estimator.vehicle import Vehicle, load_vehicle
+from sim_node.departures import Departures
 
 HELP = "simulate seeded runs and estimate from each"
 DESCRIPTION = ("Simulate the half car over seeded roads and run the estimator on each run; print a table "
@@ -39,6 +48,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="estimation method (default: likelihood, the nodes' default: Rozyn's pipeline "
                         "then the likelihood refinement; rozyn: Rozyn's pipeline alone)")
     add_vehicle_option(p)
+    add_departure_options(p)
+    add_vehicle_error_options(p)
     seeds = p.add_mutually_exclusive_group()
     seeds.add_argument("--seed", type=int, default=1, help="one seed (default: 1)")
     seeds.add_argument("--seeds", metavar="SPEC", help="seeds: 1-100, or 1,5,9-12")
@@ -55,6 +66,7 @@ def trial_spec(args: argparse.Namespace) -> TrialSpec:
         duration_s=args.duration_s, rate_hz=args.rate_hz, noise_std_mps2=args.noise_std_mps2,
         noise_fraction=args.noise_fraction,
         vehicle=load_vehicle(args.vehicle) if args.vehicle else Vehicle(), method=args.method,
+        departures=Departures(**departure_values(args)), **vehicle_error_values(args),
     )
 
 
@@ -82,7 +94,7 @@ def format_trials(spec: TrialSpec, results: Sequence[TrialResult]) -> str:
     }[spec.road]
     head = (f"{road}, {spec.speed_kmh:g} km/h, {spec.duration_s:g} s at {spec.rate_hz:g} Hz, "
             f"method {spec.method}, {len(results)} seed(s)")
-    lines = [head, ""]
+    lines = [head, *mismatch_lines(spec), ""]
     if len(results) == 1:
         return "\n".join(lines + _one_trial(results[0]))
     s = summarise(results)
@@ -98,6 +110,24 @@ def format_trials(spec: TrialSpec, results: Sequence[TrialResult]) -> str:
     for r in failed[:5]:
         lines.append(f"  seed {r.seed}: {r.estimate.reason}")
     return "\n".join(lines)
+
+
+def mismatch_lines(spec: TrialSpec) -> list[str]:
+    """How the run departs from the estimator's model, as report lines (none: it does not)."""
+    d = spec.departures
+    plant = [text for on, text in (
+        (d.damper_ratio != 1.0, f"dampers {d.damper_ratio:g}x stiffer in rebound than in compression"),
+        (d.spring_progression != 0.0, f"progressive springs, +{d.spring_progression * 100:g} % force at "
+                                      f"{d.spring_reference_m * 1e3:g} mm"),
+        (d.gains is not None, f"sensor gain errors {d.gain_error_front * 100:+g} % front, "
+                              f"{d.gain_error_rear * 100:+g} % rear"),
+        (d.time_offset_s != 0.0, f"rear sensor {d.time_offset_s * 1e3:+g} ms late"),
+        (d.lowpass_hz > 0.0, f"{d.lowpass_hz:g} Hz low-pass in both sensors"),
+    ) if on]
+    told = [f"{key.removesuffix('_error').replace('_', ' ')} {getattr(spec, key) * 100:+g} %"
+            for key in VEHICLE_ERRORS if getattr(spec, key) != 0.0]
+    return ([f"simulated vehicle departs: {'; '.join(plant)}"] if plant else []) + \
+        ([f"estimator told wrong: {'; '.join(told)}"] if told else [])
 
 
 def _one_trial(r: TrialResult) -> list[str]:

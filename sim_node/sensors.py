@@ -1,0 +1,68 @@
+"""The simulated accelerometers: what each reads of the body's motion at its mount.
+
+A sample is the vertical specific force (REP 145: gravity included, +g at rest) of the
+body at the sensor, through the sensor's departures (:mod:`sim_node.departures`):
+
+1. an IMU low-pass, the same in both sensors (``lowpass_hz``; 0: none): a causal
+   2nd-order Butterworth (bilinear, cutoff pre-warped: -3 dB exactly at ``lowpass_hz``)
+   run at the plant's internal rate on the body's acceleration before sampling; its state
+   carries over between blocks and starts settled on the first value. Gravity is a
+   constant and the filter's gain at 0 Hz is 1, so filtering before adding it is the same;
+2. sampling at the output rate (every ``oversample``-th plant step);
+3. a gain per sensor on the specific force: ``(1 + gain_error) (a + g)``;
+4. the sensor's bias (then the simulation adds its white noise).
+
+The time offset between the sensors is the plant's (a delayed output,
+:class:`sim_node.halfcar.HalfCarPlant`), exact at any offset.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import butter, sosfilt, sosfilt_zi
+
+from sim_node.departures import Departures
+
+GRAVITY_MPS2 = 9.80665
+LOWPASS_ORDER = 2
+
+
+class Accelerometers:
+    """The front and rear accelerometers, streaming.
+
+    Args:
+        departures: the sensors' gains and low-pass (the plant's are not used here).
+        plant_rate_hz: the rate of the accelerations given to :meth:`lowpass`.
+        bias_mps2: (front, rear) constant offsets.
+        include_gravity: add +g to the specific force (REP 145).
+    """
+
+    def __init__(self, departures: Departures, plant_rate_hz: float, bias_mps2: tuple[float, float],
+                 include_gravity: bool) -> None:
+        self._sos = None
+        if departures.lowpass_hz > 0.0:
+            self._sos = butter(LOWPASS_ORDER, departures.lowpass_hz, fs=plant_rate_hz, output="sos")
+        self._state: np.ndarray | None = None
+        gains = departures.gains
+        self._gains = None if gains is None else np.asarray(gains)
+        self._bias = np.asarray(bias_mps2, dtype=float)
+        self._gravity = GRAVITY_MPS2 if include_gravity else 0.0
+
+    def lowpass(self, accel_mps2: np.ndarray) -> np.ndarray:
+        """The IMU low-pass over (n, 2) front/rear accelerations at the plant's rate (continuing)."""
+        if self._sos is None or accel_mps2.shape[0] == 0:
+            return accel_mps2
+        if self._state is None:  # settled on the first value: (sections, 2 states, 2 channels)
+            self._state = sosfilt_zi(self._sos)[:, :, None] * accel_mps2[0]
+        out, self._state = sosfilt(self._sos, accel_mps2, axis=0, zi=self._state)
+        return np.asarray(out)
+
+    def read(self, accel_mps2: np.ndarray) -> np.ndarray:
+        """(n, 2) sampled body accelerations -> what the sensors read (before noise)."""
+        if self._gains is None:  # today's operations, so runs without departures stay bit for bit
+            accel = accel_mps2 + self._bias
+            return accel + self._gravity if self._gravity else accel
+        return self._gains * (accel_mps2 + self._gravity) + self._bias
+
+
+__all__ = ["GRAVITY_MPS2", "Accelerometers"]
