@@ -20,7 +20,7 @@ from typing import Any, ClassVar
 
 import yaml
 
-from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.errors import ConfigError, RozynError
 from rozyn_estimator.parameters import build, check, param, spec_of
 from rozyn_estimator.tolerances import Tolerances
 
@@ -111,7 +111,7 @@ def vehicle_from_mapping(data: Mapping[str, Any], *, source: str = "vehicle") ->
     unknown = sorted(str(k) for k in set(data) - {*FIELD_UNITS, "tolerances"})
     if unknown:
         raise ConfigError(
-            f"{source}: unknown vehicle parameter(s) {', '.join(unknown)}; "
+            f"{source}: unknown vehicle parameter(s) {_listed(unknown)}; "
             f"known: {', '.join(FIELD_UNITS)}, tolerances"
         )
     values = dict(data)
@@ -120,8 +120,108 @@ def vehicle_from_mapping(data: Mapping[str, Any], *, source: str = "vehicle") ->
             values["tolerances"] = Tolerances.from_mapping(values["tolerances"], source)
         return Vehicle(**values)
     except ConfigError as exc:
-        text = str(exc)
-        raise ConfigError(text if text.startswith(source) else f"{source}: {text}") from None
+        raise ConfigError(one_line(str(exc) if str(exc).startswith(source) else f"{source}: {exc}")) from None
+
+
+def _listed(names: list[str], shown: int = 10) -> str:
+    """Names for a message: the first few, each cut short (a file may hold thousands)."""
+    cut = [one_line(n, 60) for n in names[:shown]]
+    more = f" and {len(names) - shown} more" if len(names) > shown else ""
+    return ", ".join(cut) + more
+
+
+def one_line(text: str, limit: int = 2000) -> str:
+    """A message as one bounded line: what the user cannot see (newlines, control characters)
+    escaped, the end cut after ``limit`` characters (text from a file can be anything)."""
+    text = text[: 4 * limit]
+    text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+MAX_VEHICLE_FILE_BYTES = 1 << 20  # a vehicle file is about 2 kB; a ROS 2 parameter file far below this
+MAX_YAML_DEPTH = 32  # nesting of mappings and sequences (a vehicle in a ROS 2 parameter file: 4)
+MAX_YAML_NODES = 200_000  # scalars, mappings and sequences, aliases counted as what they repeat
+_LOADER: Any = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's: 50x faster
+
+
+def load_yaml_file(path: Path, *, max_bytes: int, what: str, error: type[RozynError] = ConfigError) -> Any:
+    """A YAML file read safely: bounded in size, nesting and nodes, UTF-8 checked.
+
+    Malformed files (binary, not UTF-8, nested too deep to parse, a YAML bomb of
+    aliases, too large) are refused before they can take long or print much.
+
+    Args:
+        path: the file.
+        max_bytes: the largest file accepted.
+        what: what the file is, for messages (``vehicle file``).
+        error: the error type raised (:class:`ConfigError`, or the caller's).
+
+    Returns:
+        The document (None for an empty one).
+
+    Raises:
+        RozynError: ``error`` with one line naming the file and the problem.
+    """
+    name = one_line(str(path))
+    try:
+        with path.open("rb") as f:
+            raw = f.read(max_bytes + 1)
+    except OSError as exc:
+        raise error(f"{name}: cannot read {what}: {exc.strerror or exc}") from None
+    if len(raw) > max_bytes:
+        raise error(f"{name}: too large for a {what} (more than {max_bytes} bytes)")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise error(f"{name}: not a {what}: not UTF-8 text (byte 0x{raw[exc.start]:02x} at position "
+                    f"{exc.start})") from None
+    try:
+        problem = _yaml_shape_problem(text)
+        data = None if problem else yaml.load(text, Loader=_LOADER)  # a safe loader
+    except (yaml.YAMLError, ValueError) as exc:  # ValueError: e.g. an integer of 5000 digits
+        raise error(f"{name}: not valid YAML: {_yaml_error(exc)}") from None
+    if problem:
+        raise error(f"{name}: refused as a {what}: {problem}")
+    return data
+
+
+def _yaml_error(exc: Exception) -> str:
+    """A YAML error on one line: what, and where (PyYAML's own text spans several lines)."""
+    if isinstance(exc, yaml.MarkedYAMLError):
+        mark = exc.problem_mark or exc.context_mark
+        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
+        text = ": ".join(str(part) for part in (exc.context, exc.problem) if part) + where
+    else:
+        text = " ".join(str(exc).split())
+    return one_line(text, 300)
+
+
+def _yaml_shape_problem(text: str) -> str | None:
+    """Why the document is refused unread: nested deeper than MAX_YAML_DEPTH, or more
+    than MAX_YAML_NODES nodes, aliases counted as the nodes they repeat (libyaml's parser
+    is iterative: the check cannot itself recurse). None when it may be read."""
+    depth: list[tuple[str | None, int]] = []  # the open collections: (anchor, nodes before)
+    sizes: dict[str, int] = {}  # anchor -> nodes under it
+    nodes = 0
+    for event in yaml.parse(text, Loader=_LOADER):
+        if isinstance(event, yaml.CollectionStartEvent):
+            depth.append((event.anchor, nodes))
+            nodes += 1
+            if len(depth) > MAX_YAML_DEPTH:
+                return f"nested deeper than {MAX_YAML_DEPTH} levels"
+        elif isinstance(event, yaml.CollectionEndEvent):
+            anchor, before = depth.pop()
+            if anchor is not None:
+                sizes[anchor] = nodes - before
+        elif isinstance(event, yaml.ScalarEvent):
+            nodes += 1
+            if event.anchor is not None:
+                sizes[event.anchor] = 1
+        elif isinstance(event, yaml.AliasEvent):
+            nodes += sizes.get(event.anchor or "", 1)
+        if nodes > MAX_YAML_NODES:
+            return f"more than {MAX_YAML_NODES} values (aliases counted as what they repeat)"
+    return None
 
 
 def load_vehicle(path: str | Path) -> Vehicle:
@@ -129,20 +229,15 @@ def load_vehicle(path: str | Path) -> Vehicle:
 
     The file is either a flat mapping of the fields of :class:`Vehicle` or a ROS 2
     parameter file (``<node>: ros__parameters: vehicle: {...}``); missing fields keep
-    their Table 5-1 defaults.
+    their Table 5-1 defaults. At most :data:`MAX_VEHICLE_FILE_BYTES` are read (see
+    :func:`load_yaml_file` for what else is refused).
 
     Raises:
-        ConfigError: the file is missing, is not YAML, or a field is invalid.
+        ConfigError: the file is missing, too large, not UTF-8, not YAML, or a field is
+            invalid (one line naming the file and the field).
     """
     p = Path(path)
-    try:
-        text = p.read_text()
-    except OSError as exc:
-        raise ConfigError(f"{p}: cannot read vehicle file: {exc.strerror}") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: not valid YAML: {exc}") from None
+    data = load_yaml_file(p, max_bytes=MAX_VEHICLE_FILE_BYTES, what="vehicle file")
     return vehicle_from_mapping(_vehicle_section(data, str(p)), source=str(p))
 
 

@@ -13,7 +13,10 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
-from rozyn_estimator.bag import default_typestore
+from rozyn_estimator.bag import LATCHED_QOS, SENSOR_QOS, BagWriter, FieldReader, default_typestore
+
+NS = 1_000_000_000
+IMU = "sensor_msgs/msg/Imu"
 
 QOS_KEYS = {
     "history",
@@ -135,3 +138,63 @@ def inertia_message(store, stamp_ns: int, m: float, iyy: float, com_x: float):
             izz=nan,
         ),
     )
+
+
+def strip_crcs(file: Path) -> None:
+    """Zero the CRC of every chunk and of the data section, as a writer without CRCs leaves them."""
+    import struct
+
+    with file.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    data = bytearray(file.read_bytes())
+    for chunk in summary.chunk_indexes:
+        crc_at = chunk.chunk_start_offset + 1 + 8 + 8 + 8 + 8  # opcode, length, start, end, size
+        data[crc_at : crc_at + 4] = bytes(4)
+    footer = len(data) - 8 - (1 + 8 + 8 + 8 + 4)  # magic, then the footer record
+    summary_start = struct.unpack_from("<Q", data, footer + 9)[0]
+    data_end = summary_start - (1 + 8 + 4)  # the DataEnd record: opcode, length, crc
+    assert data[data_end] == 0x0F
+    data[data_end + 9 : data_end + 13] = bytes(4)
+    file.write_bytes(bytes(data))
+
+
+def flip_sign(file: Path, value: float) -> int:
+    """Flip the sign of the first float64 ``value`` in the file (an uncompressed chunk); its offset."""
+    import struct
+
+    data = bytearray(file.read_bytes())
+    at = data.find(struct.pack("<d", value))
+    assert at > 0, value
+    data[at + 7] ^= 0x80
+    file.write_bytes(bytes(data))
+    return at
+
+
+def imu_bag(path: Path, store, n: int = 300, chunk_size: int = 1 << 20, close: bool = True,
+            compression: str = "zstd") -> BagWriter:
+    """Front/rear Imu at 100 Hz (z = k), a latched truth, custom data."""
+    writer = BagWriter(path, chunk_size=chunk_size, compression=compression)
+    ids = [writer.add_topic(t, IMU, [SENSOR_QOS]) for t in ("/accel/front", "/accel/rear")]
+    truth = writer.add_topic("/sim/ground_truth", "geometry_msgs/msg/InertiaStamped", [LATCHED_QOS])
+    writer.set_custom_data("note", "made by test_bag")
+    inertia = inertia_message(store, 0, 1000.0, 2000.0, -1.2)
+    writer.write(truth, 1, bytes(store.serialize_cdr(inertia, "geometry_msgs/msg/InertiaStamped")))
+    for k in range(n):
+        for c, tid in enumerate(ids):
+            msg = imu_message(store, k * NS // 100, float(k), f"accel_{c}")
+            writer.write(tid, 10 + 2 * k + c, bytes(store.serialize_cdr(msg, IMU)))
+    if close:
+        writer.close()
+    return writer
+
+
+def z_values(reader, topic="/accel/front") -> list[float]:
+    """``linear_acceleration.z`` of every message of ``topic`` (NaN: could not be decoded)."""
+    info = reader.topic(topic)
+    fr = FieldReader(
+        reader.typestore, info.msgtype, ["linear_acceleration.z"], reader.deserialize, cdr=reader.cdr
+    )
+    out = []
+    for batch in reader.batches([topic], size=100):
+        out += fr.read(batch.messages)[1][:, 0].tolist()
+    return out

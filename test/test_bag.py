@@ -6,22 +6,19 @@ import shutil
 import subprocess
 import sys
 import threading
-from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
-from bag_helpers import check_bag, imu_message, inertia_message
+from bag_helpers import check_bag, imu_bag, imu_message, z_values
 from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 
 from rozyn_estimator.bag import (
-    LATCHED_QOS,
     SENSOR_QOS,
     BagWriter,
-    FieldReader,
     Qos,
     QueuedBagWriter,
     open_bag,
@@ -37,36 +34,10 @@ def store():
     return get_typestore(Stores.ROS2_JAZZY)
 
 
-def _imu_bag(path: Path, store, n: int = 300, chunk_size: int = 1 << 20, close: bool = True) -> BagWriter:
-    """Front/rear Imu at 100 Hz (z = k), a latched truth, custom data."""
-    writer = BagWriter(path, chunk_size=chunk_size)
-    ids = [writer.add_topic(t, IMU, [SENSOR_QOS]) for t in ("/accel/front", "/accel/rear")]
-    truth = writer.add_topic("/sim/ground_truth", "geometry_msgs/msg/InertiaStamped", [LATCHED_QOS])
-    writer.set_custom_data("note", "made by test_bag")
-    inertia = inertia_message(store, 0, 1000.0, 2000.0, -1.2)
-    writer.write(truth, 1, bytes(store.serialize_cdr(inertia, "geometry_msgs/msg/InertiaStamped")))
-    for k in range(n):
-        for c, tid in enumerate(ids):
-            msg = imu_message(store, k * NS // 100, float(k), f"accel_{c}")
-            writer.write(tid, 10 + 2 * k + c, bytes(store.serialize_cdr(msg, IMU)))
-    if close:
-        writer.close()
-    return writer
-
-
-def _z_values(reader, topic="/accel/front") -> list[float]:
-    info = reader.topic(topic)
-    fr = FieldReader(
-        reader.typestore, info.msgtype, ["linear_acceleration.z"], reader.deserialize, cdr=reader.cdr
-    )
-    out = []
-    for batch in reader.batches([topic], size=100):
-        out += fr.read(batch.messages)[1][:, 0].tolist()
-    return out
 
 
 def test_written_bag_is_rosbag2_and_reads_back_everywhere(tmp_path, store):
-    _imu_bag(tmp_path / "run", store)
+    imu_bag(tmp_path / "run", store)
     counts = check_bag(tmp_path / "run")
     assert counts == {"/accel/front": 300, "/accel/rear": 300, "/sim/ground_truth": 1}
     info = yaml.safe_load((tmp_path / "run" / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
@@ -81,7 +52,7 @@ def test_written_bag_is_rosbag2_and_reads_back_everywhere(tmp_path, store):
         assert reader.custom_data == {"note": "made by test_bag"}
         assert [t.count for t in reader.topics.values()] == [300, 300, 1]
         assert reader.topic("accel/front").msgtype == IMU  # relative names: root namespace
-        assert _z_values(reader) == [float(k) for k in range(300)]
+        assert z_values(reader) == [float(k) for k in range(300)]
         order = np.concatenate([b.log_ns for b in reader.batches(["accel/front", "accel/rear"], size=77)])
         assert np.all(np.diff(order) > 0)  # bag order is receive order
 
@@ -106,7 +77,7 @@ def test_not_a_bag(tmp_path):
 
 
 def test_missing_topic_lists_the_topics_there_are(tmp_path, store):
-    _imu_bag(tmp_path / "run", store, n=3)
+    imu_bag(tmp_path / "run", store, n=3)
     with open_bag(tmp_path / "run") as reader, pytest.raises(BagError) as err:
         reader.topic("accel/middle")
     assert "no topic /accel/middle" in str(err.value)
@@ -122,7 +93,7 @@ def test_empty_bag(tmp_path):
 
 
 def test_truncated_mcap_is_named_and_salvaged(tmp_path, store):
-    _imu_bag(tmp_path / "run", store, n=600, chunk_size=16_000)
+    imu_bag(tmp_path / "run", store, n=600, chunk_size=16_000)
     file = tmp_path / "run" / "run_0.mcap"
     data = file.read_bytes()
     file.write_bytes(data[: len(data) // 2])
@@ -130,31 +101,31 @@ def test_truncated_mcap_is_named_and_salvaged(tmp_path, store):
         open_bag(tmp_path / "run")
     assert str(file) in str(err.value) and "damaged" in str(err.value) and "--salvage" in str(err.value)
     with open_bag(tmp_path / "run", salvage=True) as reader:
-        z = _z_values(reader)
+        z = z_values(reader)
         assert reader.damage and "run_0.mcap" in reader.damage[0]
         assert reader.custom_data == {"note": "made by test_bag"}
     assert 100 < len(z) < 600 and z == [float(k) for k in range(len(z))]  # an intact prefix
 
 
 def test_corrupted_chunk_is_named_and_skipped_by_salvage(tmp_path, store):
-    _imu_bag(tmp_path / "run", store, n=600, chunk_size=16_000)
+    imu_bag(tmp_path / "run", store, n=600, chunk_size=16_000)
     file = tmp_path / "run" / "run_0.mcap"
     data = bytearray(file.read_bytes())
     middle = len(data) // 3
     data[middle : middle + 64] = bytes(64)
     file.write_bytes(bytes(data))
     with open_bag(tmp_path / "run") as reader, pytest.raises(BagError) as err:
-        _z_values(reader)
+        z_values(reader)
     assert str(file) in str(err.value) and "damaged" in str(err.value)
     with open_bag(tmp_path / "run", salvage=True) as reader:
-        z = _z_values(reader)
+        z = z_values(reader)
         assert len(reader.damage) == 1 and "chunk at byte" in reader.damage[0]
     assert 300 < len(z) < 600 and z[-1] == 599.0  # one chunk lost, the rest read to the end
     assert set(z) <= {float(k) for k in range(600)} and z == sorted(z)
 
 
 def test_a_crashed_recording_loses_only_what_was_not_flushed(tmp_path, store):
-    writer = _imu_bag(tmp_path / "run", store, n=200, close=False)
+    writer = imu_bag(tmp_path / "run", store, n=200, close=False)
     writer.flush()
     for k in range(200, 250):  # after the last flush: lost in the crash
         writer.write(0, 10_000 + k, bytes(store.serialize_cdr(imu_message(store, k * NS // 100, 1.0), IMU)))
@@ -163,7 +134,7 @@ def test_a_crashed_recording_loses_only_what_was_not_flushed(tmp_path, store):
     with pytest.raises(BagError, match=r"no metadata.yaml .*--salvage"):
         open_bag(tmp_path / "crashed")
     with open_bag(tmp_path / "crashed", salvage=True) as reader:
-        assert _z_values(reader) == [float(k) for k in range(200)]
+        assert z_values(reader) == [float(k) for k in range(200)]
         assert reader.custom_data == {"note": "made by test_bag"}  # written at once, not at close
 
 
@@ -201,12 +172,12 @@ def test_sqlite3_and_ros1_bags_are_read(tmp_path, store):
     for path, cdr in ((sqlite, True), (tmp_path / "run.bag", False)):
         with open_bag(path) as reader:
             assert reader.cdr is cdr
-            assert _z_values(reader) == [k / 2 for k in range(50)]
+            assert z_values(reader) == [k / 2 for k in range(50)]
 
 
 def test_the_indexed_fast_path_reads_what_anyreader_reads(tmp_path, store):
     """MCAP files are read through their message indexes; rosbags' AnyReader is the reference."""
-    _imu_bag(tmp_path / "run", store, n=900, chunk_size=20_000)
+    imu_bag(tmp_path / "run", store, n=900, chunk_size=20_000)
     names = ["/accel/rear", "/sim/ground_truth", "/accel/front"]
     with open_bag(tmp_path / "run") as reader:
         assert reader._indexed

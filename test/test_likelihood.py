@@ -198,7 +198,8 @@ def test_auto_spectra_only_are_much_less_precise(window):
 
 def test_nuisance_suspension_removes_a_stiffness_error(window):
     accel, speed = window
-    told = EXACT.replace(suspension_stiffness_front_npm=49_500.0, suspension_stiffness_rear_npm=88_000.0)  # +10 %
+    # +10 %
+    told = EXACT.replace(suspension_stiffness_front_npm=49_500.0, suspension_stiffness_rear_npm=88_000.0)
     start = np.array([1000.0, 2000.0, 1.2])
     fixed = refine(accel, 100.0, told, start, speed)
     free = refine(accel, 100.0, told, start, speed, LikelihoodConfig(estimate_suspension=True))
@@ -366,7 +367,7 @@ def test_every_derivative_of_the_model_matches_finite_differences():
     rng = np.random.default_rng(3)
     theta = model.theta(np.array([1000.0, 2000.0, 1.2]), 1e-4, np.array([1e-6, 2e-6]))
     theta[6:] += 0.05 * rng.standard_normal(theta.size - 6)
-    S, dS = model.spectrum(theta)
+    _, dS = model.spectrum(theta)
     for j, name in enumerate(model.names):
         h = 1e-6 * max(1.0, abs(theta[j]))
         hi, lo = theta.copy(), theta.copy()

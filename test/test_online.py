@@ -168,8 +168,10 @@ def test_rate_mismatch_and_offsets_are_resampled(run):
     est = online()
     fine = Simulation(SimConfig(duration_s=200.0, seed=3, rate_hz=400.0)).run(200.0)
     fine_t = 1000 * NS + np.round(fine.t_s * NS).astype(np.int64) + 1_300_000  # 1.3 ms late
-    jobs = est.add_batch(np.zeros(len(stamps), int), stamps, accel[:, 0])
-    jobs += est.add_batch(np.ones(len(fine_t), int), fine_t, fine.accel_mps2[:, 1])
+    channels = np.r_[np.zeros(len(stamps), int), np.ones(len(fine_t), int)]
+    t, v = np.r_[stamps, fine_t], np.r_[accel[:, 0], fine.accel_mps2[:, 1]]
+    arrival = np.argsort(t, kind="stable")  # in stamp order, as they would arrive
+    jobs = est.add_batch(channels[arrival], t[arrival], v[arrival])
     updates = [u for u in (est.compute(job) for job, _ in jobs) if u.published]
     assert updates and updates[-1].fs_hz == pytest.approx(100.0)
     aligned = [u for u in feed(online(), stamps, accel) if u.published]
@@ -194,9 +196,12 @@ def test_pairing_of_aligned_and_offset_channels():
 def test_speed_varying_within_the_window_is_not_used(run):
     stamps, accel = run
     est = online(speed_mps=0.0)
-    for t in stamps[::100].tolist():
-        est.add_speed(t, 25.0 + 5.0 * (t - stamps[0]) / (60 * NS))  # +18 % per window
-    updates = [u for u in feed(est, stamps, accel) if u.window_fill >= 0.8]
+    updates = []
+    for k, (t, (a, b)) in enumerate(zip(stamps.tolist(), accel.tolist(), strict=True)):
+        if k % 100 == 0:
+            est.add_speed(t, 25.0 + 5.0 * (t - stamps[0]) / (60 * NS))  # +18 % per window
+        updates += [est.compute(job) for job in (*est.add(0, t, a), *est.add(1, t, b))]
+    updates = [u for u in updates if u.window_fill >= 0.8]
     assert updates and all(not u.published and "speed varied" in u.message for u in updates)
 
 

@@ -12,7 +12,7 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
-from rozyn_estimator.bag.source import RawBatch, TopicInfo, batch_of, damaged, files_text, reason
+from rozyn_estimator.bag.source import RawBatch, TopicInfo, batch_of, damaged
 from rozyn_estimator.bag.typestore import absolute_topic, default_typestore
 from rozyn_estimator.errors import BagError
 
@@ -50,8 +50,8 @@ class AnyReaderSource:
             The open source.
 
         Raises:
-            BagError: a directory without ``metadata.yaml`` (an unclosed recording), a
-                listed file missing, or a file AnyReader cannot open (names it).
+            BagError: a directory without ``metadata.yaml`` (an unclosed recording), or
+                a file AnyReader cannot open (names it).
         """
         from rosbags.highlevel import AnyReader
 
@@ -60,17 +60,11 @@ class AnyReaderSource:
                 f"{path} has no metadata.yaml (the recording was not closed: killed or crashed?); "
                 "--salvage reads its MCAP files directly"
             )
-        missing = [f for f in files if not f.exists()]
-        if missing:
-            raise BagError(f"{path}: metadata.yaml lists {files_text(missing)}, which is missing")
         try:
             reader = AnyReader([path], default_typestore=default_typestore())
             reader.open()
         except Exception as exc:
-            raise BagError(
-                f"{files_text(files)} is damaged ({reason(exc)})"
-                + ("; --salvage reads what can be read" if any(f.suffix == ".mcap" for f in files) else "")
-            ) from None
+            raise damaged(files, exc) from None
         return cls(reader, files)
 
     def batches(self, index: Mapping[str, int], size: int) -> Iterator[RawBatch]:

@@ -16,6 +16,11 @@ message): 58× faster, with bit-identical values (the slow path is the reference
 tests). Over an hour of 2 × 100 Hz messages that is 0.15 s instead of 9 s.
 
 The message's stamp is ``header.stamp`` when the type starts with a ``std_msgs/Header``.
+
+Garbled bytes never raise out of :meth:`FieldReader.decode`: a message the walk cannot
+read (not little-endian CDR, or too short for its strings and sequences) goes to the
+slow path on its own, and one the deserialiser refuses too is marked undecodable
+(:attr:`Decoded.ok`), its values NaN; the other messages of the batch are read as usual.
 """
 
 from __future__ import annotations
@@ -27,7 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.errors import ConfigError, RozynError
+from rozyn_estimator.vehicle import one_line
 
 NS = 1_000_000_000
 # rosbags base type name -> (numpy dtype, size in bytes)
@@ -76,6 +82,22 @@ class Packed:
     def take(self, idx: np.ndarray) -> Packed:
         """The messages at ``idx`` (sharing the buffer)."""
         return Packed(self.buf, self.starts[idx], self.lengths[idx])
+
+
+@dataclass(frozen=True)
+class Decoded:
+    """Numeric fields of a batch of messages, as :meth:`FieldReader.decode` reads them.
+
+    ``stamps``: header stamps [ns] (None for a type without a header); ``values``:
+    ``(n, len(fields))`` float64; ``ok``: ``(n,)`` False for a message that could not be
+    decoded (garbled bytes: its values are NaN, its stamp 0); ``error``: why the first
+    such message failed.
+    """
+
+    stamps: np.ndarray | None
+    values: np.ndarray
+    ok: np.ndarray
+    error: str = ""
 
 
 @dataclass(frozen=True)
@@ -155,7 +177,7 @@ class FieldReader:
         cdr: bool = True,
     ) -> None:
         if msgtype not in typestore.fielddefs:
-            raise ConfigError(f"type {msgtype} has no definition in the bag")
+            raise ConfigError(f"type {one_line(msgtype, 200)} has no definition in the bag")
         for path in fields:
             kind = field_type(typestore, msgtype, path)
             if kind not in NUMERIC:
@@ -177,29 +199,56 @@ class FieldReader:
         self._walks = compiled if walks and len(compiled) == len(walks) else None
         self.vectorised = self._walks is not None
 
-    def read(self, messages: Packed | Sequence[bytes]) -> tuple[np.ndarray | None, np.ndarray]:
-        """(header stamps [ns] or None, values ``(n, len(fields))`` as float64)."""
-        packed = messages if isinstance(messages, Packed) else Packed.of(messages)
-        if len(packed) and self._walks is not None:
-            out = _read_vectorised(self._walks, packed)
-            if out is not None:
-                values = np.column_stack([c.astype(np.float64) for c in out[: len(self.fields)]])
-                stamps = None
-                if self.has_header:
-                    sec, nanosec = out[len(self.fields) :]
-                    stamps = sec.astype(np.int64) * NS + nanosec.astype(np.int64)
-                return stamps, values
-        return self._read_slow(packed)
+    def decode(self, messages: Packed | Sequence[bytes]) -> Decoded:
+        """The fields (and header stamps) of every message; garbled ones marked, never raised.
 
-    def _read_slow(self, packed: Packed) -> tuple[np.ndarray | None, np.ndarray]:
-        values = np.empty((len(packed), len(self.fields)))
-        stamps = np.empty(len(packed), np.int64) if self.has_header else None
-        for i in range(len(packed)):
-            msg = self._deserialize(packed.message(i), self.msgtype)
-            values[i] = [float(g(msg)) for g in self._getters]
+        Args:
+            messages: serialised messages of :attr:`msgtype`.
+
+        Returns:
+            Stamps, values and which messages could be decoded (see :class:`Decoded`).
+        """
+        packed = messages if isinstance(messages, Packed) else Packed.of(messages)
+        n = len(packed)
+        values = np.full((n, len(self.fields)), np.nan)
+        stamps = np.zeros(n, np.int64) if self.has_header else None
+        ok = np.zeros(n, bool)
+        if n and self._walks is not None:
+            columns, ok = _read_vectorised(self._walks, packed)
+            if ok.any():
+                nf = len(self.fields)
+                values[ok] = np.column_stack([c[ok].astype(np.float64) for c in columns[:nf]])
+                if stamps is not None:
+                    sec, nanosec = columns[nf:]
+                    stamps[ok] = sec[ok].astype(np.int64) * NS + nanosec[ok].astype(np.int64)
+        error = ""
+        for i in np.flatnonzero(~ok).tolist():
+            try:
+                msg = self._deserialize(packed.message(i), self.msgtype)
+                row = [float(g(msg)) for g in self._getters]
+                stamp = msg.header.stamp.sec * NS + msg.header.stamp.nanosec if stamps is not None else 0
+            except Exception as exc:  # garbled bytes fail a deserialiser in many ways (serde, struct, …)
+                error = error or _why(exc)
+                continue
+            values[i] = row
             if stamps is not None:
-                stamps[i] = msg.header.stamp.sec * NS + msg.header.stamp.nanosec
-        return stamps, values
+                stamps[i] = stamp
+            ok[i] = True
+        return Decoded(stamps, values, ok, error)
+
+    def read(self, messages: Packed | Sequence[bytes]) -> tuple[np.ndarray | None, np.ndarray]:
+        """(header stamps [ns] or None, values ``(n, len(fields))`` as float64).
+
+        A message that cannot be decoded reads as NaN (stamp 0), which the online estimator
+        drops as it drops a NaN sample; :meth:`decode` also says which messages those are.
+        """
+        out = self.decode(messages)
+        return out.stamps, out.values
+
+
+def _why(exc: BaseException) -> str:
+    """An exception on one bounded line (garbled input can make long, many-line messages)."""
+    return one_line(str(exc).strip() if isinstance(exc, RozynError) else f"{type(exc).__name__}: {exc}", 300)
 
 
 def _article(kind: str) -> str:
@@ -262,11 +311,19 @@ def _gather(buf: np.ndarray, at: np.ndarray, size: int, dtype: str) -> np.ndarra
     return buf[at[:, None] + np.arange(size)].view(dtype).ravel()
 
 
-def _read_vectorised(walks: list[list[_Op]], packed: Packed) -> list[np.ndarray] | None:
-    """The fields of every message, or None if a message is not little-endian CDR or too short."""
+def _read_vectorised(walks: list[list[_Op]], packed: Packed) -> tuple[list[np.ndarray], np.ndarray]:
+    """The fields of every message the walks can read, and which messages those are.
+
+    A message that is not little-endian CDR or too short for a walk (garbled, big-endian)
+    is False in the mask, its entries in the columns meaningless: the slow path reads it.
+    """
     buf, starts, lengths = packed.buf, packed.starts, packed.lengths
-    if lengths.min() < 4 or np.any(buf[starts] != 0) or np.any(buf[starts + 1] != 1):
-        return None  # CDR_LE is 00 01
+    good = lengths >= 4
+    if not good.any():
+        return [], good
+    head = np.where(good, starts, 0)
+    good &= (buf[head] == 0) & (buf[head + 1] == 1)  # CDR_LE is 00 01
+    clean = bool(good.all())  # the common case: no mask to apply
     ends = starts + lengths
     out = []
     for walk in walks:
@@ -276,15 +333,23 @@ def _read_vectorised(walks: list[list[_Op]], packed: Packed) -> list[np.ndarray]
             if op.kind == "fixed":
                 pos = pos + op.nbytes
                 continue
-            if np.any(starts + pos + (op.nbytes if op.kind == "read" else 4) > ends):
-                return None
+            size = op.nbytes if op.kind == "read" else 4
+            fits = starts + pos + size <= ends
+            if clean and fits.all():
+                at = starts + pos
+            else:
+                clean = False
+                good &= fits
+                if not good.any():
+                    return [], good
+                at = np.where(good, starts + pos, 0)  # the others read the buffer's first bytes: masked
             if op.kind == "read":
-                out.append(_gather(buf, starts + pos, op.nbytes, op.dtype))
+                out.append(_gather(buf, at, size, op.dtype))
                 break
-            count = _gather(buf, starts + pos, 4, "<u4").astype(np.int64)
+            count = _gather(buf, at, 4, "<u4").astype(np.int64)
             pos = pos + 4
             if op.kind == "string":
                 pos = pos + count
             else:
                 pos = np.where(count > 0, _align(pos, op.nbytes) + count * op.nbytes, pos)
-    return out
+    return out, good

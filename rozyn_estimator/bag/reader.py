@@ -12,27 +12,30 @@ batches. Behind it one :class:`~rozyn_estimator.bag.source.MessageSource` reads:
   truncated or damaged recording (:mod:`~rozyn_estimator.bag.salvage`).
 
 Every failure becomes a :class:`~rozyn_estimator.errors.BagError` naming the file and
-what to do.
+what to do: ``metadata.yaml`` is read bounded (size, nesting) and checked before use,
+MCAP chunks are checked against their CRCs, and what no checksum protects is listed in
+:attr:`BagReader.unverified`.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from rozyn_estimator.bag.any_reader import AnyReaderSource
-from rozyn_estimator.bag.mcap_indexed import IndexedMcap
+from rozyn_estimator.bag.mcap_indexed import IndexedMcap, unchecked_chunks
 from rozyn_estimator.bag.salvage import SalvageScan
-from rozyn_estimator.bag.source import MessageSource, RawBatch, TopicInfo, reason
+from rozyn_estimator.bag.source import MessageSource, RawBatch, TopicInfo, files_text, reason
 from rozyn_estimator.bag.typestore import absolute_topic
 from rozyn_estimator.bag.writer import CUSTOM_DATA_RECORD
 from rozyn_estimator.errors import BagError
+from rozyn_estimator.vehicle import load_yaml_file, one_line
 
 BAG_SUFFIXES = (".mcap", ".db3", ".bag")
+MAX_METADATA_BYTES = 16 << 20  # rosbag2's metadata.yaml of thousands of files stays far below
 
 
 @dataclass
@@ -41,8 +44,10 @@ class BagReader:
 
     ``topics`` maps absolute topic names to :class:`~rozyn_estimator.bag.source.TopicInfo`;
     ``custom_data`` holds the bag's ``custom_data`` entries; ``damage`` says what salvage
-    mode had to skip. The messages come from ``_source`` (rosbags' AnyReader, or the
-    salvage scan), or from ``_indexed`` (the indexed MCAP fast path) when that is set.
+    mode had to skip; ``unverified`` what no checksum protects (MCAP chunks written
+    without a CRC, SQLite3 and ROS 1 storage), one line per file. The messages come from
+    ``_source`` (rosbags' AnyReader, or the salvage scan), or from ``_indexed`` (the
+    indexed MCAP fast path) when that is set.
 
     Example:
         >>> import struct, tempfile
@@ -70,6 +75,7 @@ class BagReader:
     cdr: bool  # messages are CDR (rosbag2); False: ROS 1 serialisation
     _source: MessageSource
     damage: list[str] = field(default_factory=list)
+    unverified: list[str] = field(default_factory=list)
     _indexed: MessageSource | None = None  # the fast path, when the files allow it
 
     def topic(self, name: str) -> TopicInfo:
@@ -87,7 +93,8 @@ class BagReader:
         info = self.topics.get(absolute_topic(name))
         if info is None:
             listing = ", ".join(f"{t.name} ({t.msgtype}, {t.count})" for t in self.topics.values())
-            raise BagError(f"{self.path}: no topic {absolute_topic(name)}; the bag has: {listing or 'none'}")
+            text = f"{self.path}: no topic {absolute_topic(name)}; the bag has: {listing or 'none'}"
+            raise BagError(one_line(text, 4000))
         return info
 
     def deserialize(self, data: bytes, msgtype: str) -> Any:
@@ -99,10 +106,16 @@ class BagReader:
 
         Returns:
             The rosbags message object.
+
+        Raises:
+            BagError: the bytes are not a ``msgtype`` message (garbled).
         """
-        if self.cdr:
-            return self.typestore.deserialize_cdr(data, msgtype)
-        return self.typestore.deserialize_ros1(data, msgtype)
+        try:
+            if self.cdr:
+                return self.typestore.deserialize_cdr(data, msgtype)
+            return self.typestore.deserialize_ros1(data, msgtype)
+        except Exception as exc:  # garbled bytes fail rosbags' deserialisers in many ways
+            raise BagError(f"{self.path}: a {msgtype} message cannot be decoded ({reason(exc)})") from None
 
     def batches(self, names: Sequence[str], size: int = 65536) -> Iterator[RawBatch]:
         """Messages of ``names`` in bag order, about ``size`` at a time.
@@ -150,7 +163,8 @@ def open_bag(path: str | Path, *, salvage: bool = False) -> BagReader:
         The open bag (see :class:`BagReader` for an example).
 
     Raises:
-        BagError: not a bag, unreadable, damaged (names the file), or holding no messages.
+        BagError: not a bag, unreadable, damaged (names the file), a file listed in its
+            ``metadata.yaml`` missing (salvage mode reads the others), or holding no messages.
 
     Example:
         >>> open_bag("no/such/bag")
@@ -161,27 +175,41 @@ def open_bag(path: str | Path, *, salvage: bool = False) -> BagReader:
     path = Path(path)
     if not path.exists():
         raise BagError(f"{path}: no such file or directory")
-    files = _bag_files(path)
-    reader = _open_salvage(path, files) if salvage else _open_normal(path, files)
+    info = _bag_info(path)
+    files = _bag_files(path, info)
+    missing = [f for f in files if not os.path.isfile(f)]
+    if missing and (not salvage or len(missing) == len(files)):
+        verb = "is" if len(missing) == 1 else "are"
+        hint = "; --salvage reads the others" if len(missing) < len(files) else ""
+        raise BagError(f"{path}: metadata.yaml lists {files_text(missing)}, which {verb} missing{hint}")
+    present = [f for f in files if f not in missing]
+    reader = _open_salvage(path, present) if salvage else _open_normal(path, present, info)
+    reader.damage[:0] = [f"{f.name}: missing (listed in metadata.yaml)" for f in missing]
     if reader.message_count == 0:
         reader.close()
         raise BagError(f"{path} holds no messages{' that could be salvaged' if salvage else ''}")
     return reader
 
 
-def _open_normal(path: Path, files: list[Path]) -> BagReader:
+def _open_normal(path: Path, files: list[Path], info: dict[str, Any] | None) -> BagReader:
     """AnyReader opens the bag; the indexed fast path reads it when it can."""
     source = AnyReaderSource.open(path, files)
+    try:
+        indexed = IndexedMcap.open(files)
+    except BagError:
+        source.close()
+        raise
     return BagReader(
         path=path,
         topics=source.topics,
-        custom_data=_custom_data(path, files),
+        custom_data=_custom_data(info, files),
         message_count=sum(t.count for t in source.topics.values()),
         files=files,
         typestore=source.typestore,
         cdr=source.cdr,
         _source=source,
-        _indexed=IndexedMcap.open(files),
+        unverified=_unverified(files),
+        _indexed=indexed,
     )
 
 
@@ -197,10 +225,28 @@ def _open_salvage(path: Path, files: list[Path]) -> BagReader:
         cdr=scan.cdr,
         _source=scan,
         damage=scan.damage,
+        unverified=scan.unverified,
     )
 
 
-def _bag_files(path: Path) -> list[Path]:
+def _bag_info(path: Path) -> dict[str, Any] | None:
+    """``rosbag2_bagfile_information`` of the bag's ``metadata.yaml``, checked; None without one."""
+    meta = path / "metadata.yaml"
+    if not path.is_dir() or not meta.is_file():
+        return None
+    data = load_yaml_file(meta, max_bytes=MAX_METADATA_BYTES, what="rosbag2 metadata file", error=BagError)
+    info = data.get("rosbag2_bagfile_information") if isinstance(data, dict) else None
+    names = info.get("relative_file_paths") if isinstance(info, dict) else None
+    if not isinstance(names, list) or not all(isinstance(n, str) and n and "\0" not in n for n in names):
+        raise BagError(f"{meta} is damaged (no list of file names under rosbag2_bagfile_information: "
+                       "relative_file_paths)")
+    custom = info.get("custom_data") if isinstance(info, dict) else None
+    if custom is not None and not isinstance(custom, dict):
+        raise BagError(f"{meta} is damaged (custom_data is not a mapping)")
+    return info
+
+
+def _bag_files(path: Path, info: dict[str, Any] | None) -> list[Path]:
     """The storage files of a bag; BagError if ``path`` is not a bag."""
     if path.is_file():
         if path.suffix not in BAG_SUFFIXES:
@@ -208,30 +254,38 @@ def _bag_files(path: Path) -> list[Path]:
                 f"{path} is not a bag (expected a rosbag2 directory or an .mcap, .db3 or .bag file)"
             )
         return [path]
-    meta = path / "metadata.yaml"
-    if meta.is_file():
-        try:
-            info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
-            return [path / name for name in info["relative_file_paths"]]
-        except (yaml.YAMLError, KeyError, TypeError) as exc:
-            raise BagError(f"{meta} is damaged ({reason(exc)})") from None
-    files = sorted(p for p in path.iterdir() if p.suffix in BAG_SUFFIXES)
+    if info is not None:
+        if not info["relative_file_paths"]:
+            raise BagError(f"{path / 'metadata.yaml'} lists no storage files")
+        return [path / name for name in info["relative_file_paths"]]
+    files = sorted(p for p in path.iterdir() if p.suffix in BAG_SUFFIXES and p.is_file())
     if not files:
         raise BagError(f"{path} is not a bag: no metadata.yaml and no .mcap, .db3 or .bag file in it")
     return files
 
 
-def _custom_data(path: Path, files: list[Path]) -> dict[str, str]:
+def _custom_data(info: dict[str, Any] | None, files: list[Path]) -> dict[str, str]:
     """``custom_data`` of ``metadata.yaml``, else the MCAP ``custom_data`` records."""
-    meta = path / "metadata.yaml"
-    if meta.is_file():
-        info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
-        if info.get("custom_data"):
-            return {str(k): str(v) for k, v in info["custom_data"].items()}
+    if info is not None and info.get("custom_data"):
+        return {str(k): str(v) for k, v in info["custom_data"].items()}
     out: dict[str, str] = {}
     for file in files:
         if file.suffix == ".mcap":
             out.update(_mcap_custom_data(file))
+    return out
+
+
+def _unverified(files: list[Path]) -> list[str]:
+    """What of the files no checksum protects, one line per file (see :attr:`BagReader.unverified`)."""
+    out = []
+    for file in files:
+        if file.suffix == ".mcap":
+            note = unchecked_chunks(file)
+            if note:
+                out.append(note)
+        else:
+            kind = "SQLite3" if file.suffix == ".db3" else "ROS 1"
+            out.append(f"{file.name}: {kind} storage carries no checksums: damage cannot be detected")
     return out
 
 

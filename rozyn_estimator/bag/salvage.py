@@ -5,7 +5,8 @@ ROS-free (``mcap``'s stream reader). For a recording that was killed (no summary
 chunk checked against its CRC and decompressed on its own; a bad chunk is skipped, a
 truncated or garbled record ends the file. Topics, counts, custom data and message
 definitions come from the records themselves, and :attr:`SalvageScan.damage` says
-what was lost.
+what was lost (a message definition that does not parse included: its topic cannot be
+decoded), :attr:`SalvageScan.unverified` what no CRC protects.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from rozyn_estimator.bag.source import RawBatch, TopicInfo, batched, files_text,
 from rozyn_estimator.bag.typestore import absolute_topic
 from rozyn_estimator.bag.writer import CUSTOM_DATA_RECORD
 from rozyn_estimator.errors import BagError
+from rozyn_estimator.vehicle import one_line
 
 
 class SalvageScan:
@@ -31,6 +33,7 @@ class SalvageScan:
         custom_data: the ``custom_data`` records found.
         typestore: Jazzy's types plus those the files define.
         damage: what was skipped or lost, one line per problem.
+        unverified: what no CRC protects (chunks written without one), one line per file.
     """
 
     cdr = True  # MCAP files from rosbag2: CDR messages
@@ -42,12 +45,14 @@ class SalvageScan:
         custom_data: dict[str, str],
         typestore: Any,
         damage: list[str],
+        unverified: list[str],
     ) -> None:
         self.files = files
         self.topics = topics
         self.custom_data = custom_data
         self.typestore = typestore
         self.damage = damage
+        self.unverified = unverified
 
     @classmethod
     def open(cls, path: Path, files: list[Path]) -> SalvageScan:
@@ -71,15 +76,24 @@ class SalvageScan:
         topics: dict[str, TopicInfo] = {}
         custom: dict[str, str] = {}
         damage: list[str] = []
+        unverified: list[str] = []
         for file in files:
             schemas: dict[int, Any] = {}
             channels: dict[int, Any] = {}
             counts: dict[int, int] = {}
+            chunks = bare = 0
             for kind, record in mcap_records(file, damage):
-                if kind == "schema":
+                if kind == "chunk":
+                    chunks += 1
+                    bare += record.uncompressed_crc == 0
+                elif kind == "schema":
                     schemas[record.id] = record
                     if record.encoding == "ros2msg" and record.name not in store.fielddefs:
-                        store.register(get_types_from_msg(record.data.decode(), record.name))
+                        try:
+                            store.register(get_types_from_msg(record.data.decode(), record.name))
+                        except Exception as exc:  # a garbled definition fails the parser in many ways
+                            damage.append(f"{file.name}: the definition of {one_line(str(record.name), 80)} "
+                                          f"does not parse ({reason(exc)}); its messages cannot be decoded")
                 elif kind == "channel":
                     channels[record.id] = record
                 elif kind == "message":
@@ -91,7 +105,10 @@ class SalvageScan:
                 msgtype = schemas[ch.schema_id].name if ch.schema_id in schemas else ""
                 old = topics.get(name)
                 topics[name] = TopicInfo(name, msgtype, counts.get(cid, 0) + (old.count if old else 0))
-        return cls(files, topics, custom, store, damage)
+            if bare:
+                unverified.append(f"{file.name}: {bare} of {chunks} chunks carry no CRC: damage in them "
+                                  "cannot be detected")
+        return cls(files, topics, custom, store, damage, unverified)
 
     def batches(self, index: Mapping[str, int], size: int) -> Iterator[RawBatch]:
         """See :meth:`MessageSource.batches <rozyn_estimator.bag.source.MessageSource.batches>`.
@@ -116,9 +133,10 @@ class SalvageScan:
 def mcap_records(file: Path, damage: list[str]) -> Iterator[tuple[str, Any]]:
     """(kind, record) of an MCAP file in file order, skipping damaged chunks.
 
-    Kinds: ``schema``, ``channel``, ``message``, ``metadata``. A chunk that fails its
-    CRC or does not decompress is skipped; reading stops at a truncated or garbled
-    record. Each problem is appended to ``damage``.
+    Kinds: ``chunk`` (each chunk, before its records), ``schema``, ``channel``,
+    ``message``, ``metadata``. A chunk that fails its CRC or does not decompress is
+    skipped; reading stops at a truncated or garbled record, or a file that cannot be
+    read. Each problem is appended to ``damage``.
 
     Args:
         file: the MCAP file.
@@ -131,7 +149,12 @@ def mcap_records(file: Path, damage: list[str]) -> Iterator[tuple[str, Any]]:
     from mcap.stream_reader import StreamReader, breakup_chunk
 
     kinds = {Schema: "schema", Channel: "channel", Message: "message", Metadata: "metadata"}
-    with file.open("rb") as f:
+    try:
+        f = file.open("rb")
+    except OSError as exc:
+        damage.append(f"{file.name}: cannot be read ({exc.strerror or exc})")
+        return
+    with f:
         records = StreamReader(f, emit_chunks=True, record_size_limit=1 << 30).records
         offset = 0
         while True:
@@ -150,6 +173,7 @@ def mcap_records(file: Path, damage: list[str]) -> Iterator[tuple[str, Any]]:
                 )
                 return
             if isinstance(record, Chunk):
+                yield "chunk", record
                 try:
                     inner = breakup_chunk(record, validate_crc=True)
                 except Exception as exc:

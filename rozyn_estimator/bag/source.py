@@ -26,6 +26,7 @@ import numpy as np
 
 from rozyn_estimator.bag.cdr import Packed
 from rozyn_estimator.errors import BagError
+from rozyn_estimator.vehicle import one_line
 
 
 @dataclass(frozen=True)
@@ -151,7 +152,7 @@ def damaged(files: Sequence[Path], exc: BaseException, where: str = "", after: i
         A :class:`~rozyn_estimator.errors.BagError` saying what to do (``--salvage``
         for MCAP).
     """
-    hint = "; --salvage reads what can be read" if files[0].suffix == ".mcap" else ""
+    hint = "; --salvage reads what can be read" if any(f.suffix == ".mcap" for f in files) else ""
     place = f" ({where}: {reason(exc)})" if where else f" ({reason(exc)})"
     count = f" after {after} messages" if after is not None else ""
     return BagError(f"{files_text(files)} is damaged{place}{count}{hint}")
@@ -159,12 +160,13 @@ def damaged(files: Sequence[Path], exc: BaseException, where: str = "", after: i
 
 def files_text(files: Sequence[Path]) -> str:
     """The files, comma separated, for a message."""
-    return ", ".join(str(f) for f in files)
+    return ", ".join(one_line(str(f), 300) for f in files)
 
 
 def reason(exc: BaseException) -> str:
-    """What went wrong, in words a user can act on (a missing MCAP footer: truncated)."""
-    text = str(exc).strip().rstrip(".") or type(exc).__name__
+    """What went wrong, in words a user can act on (a missing MCAP footer: truncated), on one
+    bounded line (garbled input makes long, many-line messages)."""
+    text = " ".join(str(exc).split()).rstrip(".") or type(exc).__name__
     if "end magic" in text.lower():
-        return "truncated: the file ends before its MCAP footer"
-    return text
+        return "truncated: the file ends before its MCAP footer, as a recording that was killed leaves it"
+    return one_line(text, 200)

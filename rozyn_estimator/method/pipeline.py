@@ -30,6 +30,7 @@ from rozyn_estimator.method.budget import Budget, Calibration, rozyn_contributio
 from rozyn_estimator.method.config import PARAM_NAMES, PipelineConfig
 from rozyn_estimator.method.correlation import correlation_sums
 from rozyn_estimator.method.fit import axle_shapes, characteristic_matrix, fit_inertia
+from rozyn_estimator.method.glitches import GlitchError, gate_glitches
 from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
 from rozyn_estimator.method.likelihood import Refinement, refine
 from rozyn_estimator.method.variance import jackknife_covariance
@@ -62,6 +63,7 @@ class Estimate:
     rozyn: Estimate | None = None
     refinement: Refinement | None = None
     budget: Budget | None = None  # the covariance's statistical and systematic parts
+    glitches: tuple[int, ...] = (0, 0)  # samples gated as glitches (front, rear): method/glitches.py
 
     @property
     def ok(self) -> bool:
@@ -142,10 +144,17 @@ def estimate(
     cfg = config or PipelineConfig()
     started = time.perf_counter()
     speed, profile = _speed(speed_mps)
-    rozyn, y = _rozyn_stage(np.asarray(accel_mps2), fs_hz, vehicle, cfg, speed, started)
-    if cfg.refine == "none" or y is None:
-        return _with_budget(rozyn, vehicle, cfg)
-    return _refined(rozyn, y, fs_hz, vehicle, cfg, profile, warm_start, started)
+    accel = np.asarray(accel_mps2)
+    try:
+        y, gated = _checked(accel, fs_hz, cfg)
+    except InputError as exc:
+        return _failed(str(exc), int(accel.shape[0]) if accel.ndim >= 1 else 0, started)
+    rozyn = _rozyn_stage(y, fs_hz, vehicle, cfg, speed, started)
+    if cfg.refine == "none":
+        est = _with_budget(rozyn, vehicle, cfg)
+    else:
+        est = _refined(rozyn, y, fs_hz, vehicle, cfg, profile, warm_start, started)
+    return dataclasses.replace(est, glitches=gated) if any(gated) else est
 
 
 def _speed(speed_mps: float | np.ndarray | None) -> tuple[float | None, float | np.ndarray | None]:
@@ -161,18 +170,14 @@ def _speed(speed_mps: float | np.ndarray | None) -> tuple[float | None, float | 
 def _rozyn_stage(
     y: np.ndarray, fs_hz: float, vehicle: Vehicle, cfg: PipelineConfig, speed_mps: float | None,
     started: float,
-) -> tuple[Estimate, np.ndarray | None]:
-    """Rozyn's pipeline; also the demeaned window (None when the input is unusable)."""
-    n = int(y.shape[0]) if y.ndim >= 1 else 0
-    try:
-        y, dt = _checked(y, fs_hz, cfg)
-    except InputError as exc:
-        return _failed(str(exc), n, started), None
+) -> Estimate:
+    """Rozyn's pipeline on the checked, demeaned window."""
+    n, dt = int(y.shape[0]), 1.0 / fs_hz
     try:
         first, last = _lag_range(cfg, fs_hz, vehicle, speed_mps)
         if cfg.correlation == "free-decay":
             params, modes = _first_or_raise(_identify_and_fit(y[None, None, first:], dt, vehicle, cfg))
-            return _done(started, n, vehicle, params, None, modes), y
+            return _done(started, n, vehicle, params, None, modes)
         jackknife = cfg.variance == "jackknife"
         blocks = cfg.jackknife_blocks if jackknife else 1
         if n < blocks * (last + 1) or n < 4 * (last + 1):
@@ -189,7 +194,7 @@ def _rozyn_stage(
         decays = np.stack([_decays(r, first, cfg) for r in records])
         params, modes = _first_or_raise(_identify_and_fit(decays[:1], dt, vehicle, cfg))
         if not jackknife:
-            return _done(started, n, vehicle, params, None, modes), y
+            return _done(started, n, vehicle, params, None, modes)
         fits = _identify_and_fit(decays[1:], dt, vehicle, cfg, near=modes)
         replicates = np.array([np.full(3, np.nan) if isinstance(f, Exception) else f[0] for f in fits])
         cov, good = jackknife_covariance(replicates, params)
@@ -198,9 +203,9 @@ def _rozyn_stage(
                 f"unstable identification: only {good} of {blocks} jackknife replicates found the modes"
             )
         notes = () if good == blocks else (f"{blocks - good} of {blocks} jackknife replicates failed",)
-        return _done(started, n, vehicle, params, cov, modes, notes), y
+        return _done(started, n, vehicle, params, cov, modes, notes)
     except (InputError, IdentificationError, np.linalg.LinAlgError) as exc:
-        return _failed(str(exc), n, started), y
+        return _failed(str(exc), n, started)
 
 
 def _failed(reason: str, n: int, started: float, **extra: Any) -> Estimate:
@@ -257,7 +262,8 @@ def _warm(warm_start: Estimate | np.ndarray | None) -> Refinement | np.ndarray |
     return p if p.shape == (3,) and np.all(np.isfinite(p)) else None
 
 
-def _checked(y: np.ndarray, fs_hz: float, cfg: PipelineConfig) -> tuple[np.ndarray, float]:
+def _checked(y: np.ndarray, fs_hz: float, cfg: PipelineConfig) -> tuple[np.ndarray, tuple[int, ...]]:
+    """(the window demeaned, with glitches gated; how many per channel)."""
     if not (isinstance(fs_hz, int | float) and math.isfinite(fs_hz) and fs_hz > 0):
         raise InputError(f"sample rate must be a positive number, got {fs_hz!r}")
     if y.ndim != 2 or y.shape[1] != 2:
@@ -269,11 +275,15 @@ def _checked(y: np.ndarray, fs_hz: float, cfg: PipelineConfig) -> tuple[np.ndarr
         raise InputError(f"{int(np.sum(~np.isfinite(y)))} samples are NaN or Inf")
     if y.shape[0] < cfg.min_duration_s * fs_hz:
         raise InputError(f"window too short: {y.shape[0] / fs_hz:.2f} s < {cfg.min_duration_s:g} s")
+    try:
+        y, gated = gate_glitches(y)
+    except GlitchError as exc:
+        raise InputError(str(exc)) from None
     y = y - y.mean(axis=0)
     for i, name in enumerate(("front", "rear")):
         if not np.any(np.abs(y[:, i]) > 1e-9):
             raise InputError(f"{name} channel is constant: no vibration to identify")
-    return y, 1.0 / fs_hz
+    return y, gated
 
 
 def _lag_range(cfg: PipelineConfig, fs_hz: float, v: Vehicle, speed_mps: float | None) -> tuple[int, int]:
@@ -281,6 +291,8 @@ def _lag_range(cfg: PipelineConfig, fs_hz: float, v: Vehicle, speed_mps: float |
     first_s = cfg.min_lag_s
     if cfg.skip_wheelbase_delay and speed_mps is not None and speed_mps > 0:
         first_s = max(first_s, v.wheelbase_m / speed_mps)
+    if not first_s * fs_hz < 1e12:  # a speed so low that no window holds one wheelbase delay
+        raise InputError(f"speed {speed_mps:.3g} m/s: the wheelbase delay {first_s:.3g} s exceeds any window")
     first = math.ceil(first_s * fs_hz - 1e-9)
     if cfg.correlation == "multi-reference":
         first = max(first, 1)  # lag 0 carries the sensor noise variance

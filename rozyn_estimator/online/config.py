@@ -8,6 +8,8 @@ from typing import Any, ClassVar
 
 from rozyn_estimator.parameters import check, param
 
+MIN_SPEED_MPS = 0.1  # a known speed below walking pace is a typo (1e-308), not a drive
+
 
 @dataclass(frozen=True)
 class OnlineConfig:
@@ -38,7 +40,11 @@ class OnlineConfig:
                              low=0.0, high=150.0)
 
     def __post_init__(self) -> None:
-        check(self, (("update_period_s", lambda c: c.update_period_s <= c.window_s, "must be <= window_s"),))
+        check(self, (
+            ("update_period_s", lambda c: c.update_period_s <= c.window_s, "must be <= window_s"),
+            ("speed_mps", lambda c: c.speed_mps == 0.0 or c.speed_mps >= MIN_SPEED_MPS,
+             f"must be 0 (unknown) or at least {MIN_SPEED_MPS:g} m/s"),
+        ))
 
     def replace(self, **changes: Any) -> OnlineConfig:
         return dataclasses.replace(self, **changes)

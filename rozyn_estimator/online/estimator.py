@@ -15,9 +15,13 @@ feeding thread) and :meth:`OnlineEstimator.compute` runs the pipeline on it (in 
 thread, in due order). :meth:`OnlineEstimator.report` gives one diagnostics message.
 
 Bad input is dropped and counted, never raised: non-finite values, duplicate stamps,
-stamps older than the channel's last (out of order). A gap longer than ``max_gap_s`` or a
-stamp more than ``jump_back_s`` older than the last (bag loop, sim restart) resets the
-window, and the next report says so.
+stamps older than the channel's last (out of order: not also counted missing). A gap
+longer than ``max_gap_s`` or a stamp more than ``jump_back_s`` older than the last (bag
+loop, sim restart) resets the window, and the next report says so. A channel holds at
+most about three windows of samples (two and an update period behind its newest, trimmed
+once it holds a window more), also while the other sensor is silent and no update falls
+due. :meth:`OnlineEstimator.compute` never raises: an unexpected failure is an ERROR
+update, reported until a good one follows.
 
 The state is shared between the feeding thread, the worker that computes and the
 diagnostics timer: every public method takes the instance's lock (the pipeline itself
@@ -46,7 +50,8 @@ import numpy as np
 from rozyn_estimator.method import Estimate, PipelineConfig
 from rozyn_estimator.online.channel import Channel
 from rozyn_estimator.online.config import OnlineConfig
-from rozyn_estimator.online.records import NS, OK, WARN, Health, Job, Level, Update, update_values
+from rozyn_estimator.online.records import ERROR, NS, WARN, Health, Job, Level, Update
+from rozyn_estimator.online.status import health_values, status
 from rozyn_estimator.online.update import compute_update
 from rozyn_estimator.vehicle import Vehicle
 
@@ -151,10 +156,12 @@ class OnlineEstimator:
         with self._lock:
             self._add_speed(stamp_ns, speed_mps)
 
-    def drop(self, channel: int, reason: str) -> None:
-        """Count a message that could not be used (channel 0 front, 1 rear, 2 speed)."""
+    def drop(self, channel: int, reason: str, count: int = 1) -> None:
+        """Count messages that could not be used (channel 0 front, 1 rear, 2 speed)."""
         with self._lock:
-            self._dropped[f"{('front', 'rear', 'speed')[channel]}: {reason}"] += 1
+            self._dropped[f"{('front', 'rear', 'speed')[channel]}: {reason}"] += count
+            if channel < 2:
+                self._channels[channel].reject(reason, count)
 
     def add_batch(
         self,
@@ -165,6 +172,10 @@ class OnlineEstimator:
         speed: SpeedSamples | None = None,
     ) -> list[tuple[Job, int]]:
         """Many samples in arrival order, as :meth:`add` (and :meth:`add_speed`) one by one.
+
+        Arrival order means the channels interleaved as their samples arrive: a channel's
+        samples fed more than two windows ahead of the other's are trimmed before the other
+        catches up (so a silent sensor cannot make memory grow), as they would be one by one.
 
         Args:
             channels, stamps_ns, values: accelerometer samples (0 front, 1 rear).
@@ -189,7 +200,10 @@ class OnlineEstimator:
                 sel = channels == c
                 if np.any(sel):
                     s = stamps_ns[sel]
-                    ch.note_steps(np.diff(s) if ch.last_ns is None else np.diff(s, prepend=ch.last_ns))
+                    if ch.last_ns is None:
+                        ch.note_steps(np.diff(s), s[1:])
+                    else:
+                        ch.note_steps(np.diff(s, prepend=ch.last_ns), s)
                     ch.extend(s, values[sel])
             if speed is not None:
                 for t, v in zip(speed.stamps_ns.tolist(), speed.values, strict=True):
@@ -213,26 +227,31 @@ class OnlineEstimator:
         last = ch.last_ns
         gap = self._config.max_gap_s * NS
         if not math.isfinite(value):
-            self._dropped[f"{('front', 'rear')[channel]}: non-finite value"] += 1
+            self._reject(channel, "non-finite value")
             if last is not None and 0 < stamp_ns - last <= gap:
-                ch.note_steps([stamp_ns - last])  # its stamp arrived: not a missing sample
+                ch.note_steps([stamp_ns - last], [stamp_ns])  # its stamp arrived: not a missing sample
                 ch.last_ns = stamp_ns
             return
         if last is not None:
             if stamp_ns == last:
-                self._dropped[f"{('front', 'rear')[channel]}: duplicate stamp"] += 1
+                self._reject(channel, "duplicate stamp")
                 return
             if stamp_ns < last:
                 if last - stamp_ns > self._config.jump_back_s * NS:
                     self.reset(f"time jumped back {(last - stamp_ns) / NS:.3f} s on {self.names[channel]}")
                 else:
-                    self._dropped[f"{('front', 'rear')[channel]}: out-of-order stamp"] += 1
+                    ch.arrived_late(stamp_ns)  # dropped, so no longer counted missing too
+                    self._reject(channel, "out-of-order stamp")
                     return
             elif stamp_ns - last > gap:
                 self.reset(f"gap of {(stamp_ns - last) / NS:.3f} s on {self.names[channel]}")
             else:
-                ch.note_steps([stamp_ns - last])
+                ch.note_steps([stamp_ns - last], [stamp_ns])
         ch.append(stamp_ns, value)
+
+    def _reject(self, channel: int, reason: str) -> None:
+        self._dropped[f"{('front', 'rear')[channel]}: {reason}"] += 1
+        self._channels[channel].reject(reason)
 
     def _add_speed(self, stamp_ns: int, speed_mps: float) -> None:
         if not math.isfinite(speed_mps) or speed_mps < 0:
@@ -295,7 +314,33 @@ class OnlineEstimator:
 
     # ------------------------------------------------------------- schedule
     def _take_due(self) -> Sequence[Job]:
-        """Snapshot every update that has fallen due, oldest first."""
+        """Snapshot every update that has fallen due, oldest first; then forget what no
+        update can need."""
+        jobs = self._due()
+        self._trim(bool(jobs))
+        return jobs
+
+    def _trim(self, updated: bool) -> None:
+        """Forget the samples older than the next update's window, and in any case those
+        more than two windows and an update period behind the channel's newest: a silent
+        sensor holds up the schedule, not the memory. A window's samples are lost only when
+        a sensor's stamps lead the other's by more than a window. After an update each
+        channel is trimmed; otherwise once it holds a window more than that (cheap per sample).
+        """
+        window = round(self._config.window_s * NS)
+        horizon = 2 * window + round(self._config.update_period_s * NS)
+        slack = 0 if updated else window
+        for ch in (*self._channels, self._speed):
+            oldest = ch.oldest_ns()
+            if oldest is None or ch.last_ns is None:
+                continue
+            keep = ch.last_ns - horizon
+            if self._next_due_ns is not None:
+                keep = max(keep, self._next_due_ns - window)
+            if oldest < keep - slack:
+                ch.trim(keep)
+
+    def _due(self) -> Sequence[Job]:
         front, rear = self._channels
         if front.last_ns is None or rear.last_ns is None:
             return _NONE
@@ -313,17 +358,23 @@ class OnlineEstimator:
             jobs.append(Job(due, front.window(lo, due), rear.window(lo, due), self._speed.window(lo, due),
                             self._epoch))
             self._next_due_ns = due + period
-        keep = self._next_due_ns - window
-        for ch in (front, rear, self._speed):
-            ch.trim(keep)
         return jobs
 
     def compute(self, job: Job) -> Update:
-        """Run the pipeline on a due window (call in due order; any thread)."""
+        """Run the pipeline on a due window (call in due order; any thread).
+
+        Never raises: an unexpected exception (a bug) becomes an ERROR update that names
+        it, and like every update it stands in :meth:`health` until the next one.
+        """
         with self._lock:
             current = job.epoch == self._epoch
             settings = (self._config, self._vehicle, self._pipeline, self._warm if current else None)
-        update = compute_update(job, self.names, *settings)
+        try:
+            update = compute_update(job, self.names, *settings)
+        except Exception as exc:  # the one guard: node and replay both compute here
+            text = f"{type(exc).__name__}: {exc}"
+            text = text if len(text) <= 200 else text[:197] + "..."
+            update = Update(job.due_ns, ERROR, f"update failed (internal error, please report): {text}")
         with self._lock:
             if current and job.epoch == self._epoch:  # no reset meanwhile
                 if update.published:
@@ -356,51 +407,8 @@ class OnlineEstimator:
         return sum(self._dropped.values()) + self._channels[0].missing + self._channels[1].missing
 
     def _health(self, silent_s: tuple[float, float] | None) -> Health:
-        level, message = self._status(silent_s)
-        front, rear = self._channels
-        upd = self._last_update
-        values = {
-            "window_fill_pct": f"{(upd.window_fill if upd else 0.0) * 100:.0f}",
-            "samples_front": str(front.count),
-            "samples_rear": str(rear.count),
-            "missing_front": str(front.missing),  # gaps in the stamps: lost on the way
-            "missing_rear": str(rear.missing),
-            "window_resets": str(self._resets),
-            "dropped_total": str(sum(self._dropped.values())),
-        }
-        for reason, n in sorted(self._dropped.items()):
-            values[f"dropped ({reason})"] = str(n)
-        if upd is not None:
-            values.update(update_values(upd))
-        return Health(level, message, values)
-
-    def _status(self, silent_s: tuple[float, float] | None) -> tuple[Level, str]:
-        """Level and message, most urgent first: a silent sensor, events, the last update, losses."""
-        names, silence = self.names, self._config.silence_s
-        lasts = [ch.last_ns for ch in self._channels]
-        waiting: list[tuple[float, str]] = []
-        if silent_s is not None:
-            waiting = [(s, f"{n}: no message for {s:.1f} s")
-                       for n, s in zip(names, silent_s, strict=True) if s > silence]
-        known = [t for t in lasts if t is not None]
-        if not waiting and len(known) == 2:
-            newest = max(known)
-            waiting = [((newest - t) / NS, f"{n}: {(newest - t) / NS:.1f} s behind")
-                       for n, t in zip(names, known, strict=True) if newest - t > silence * NS]
-        if not waiting and len(known) < 2:
-            waiting = [(math.inf, f"{n}: no message yet")
-                       for n, t in zip(names, lasts, strict=True) if t is None]
-        news = [text for _, text in self._events]  # resets since the last report: always said
-        if waiting:
-            waiting.sort(reverse=True)
-            return WARN, "; ".join(["waiting for " + "; ".join(text for _, text in waiting), *news])
-        if news:
-            return max(lv for lv, _ in self._events), "; ".join(news)
-        upd = self._last_update
-        if upd is not None and upd.level != OK:
-            return upd.level, upd.message
-        losses = self._losses()
-        if losses > self._reported_losses:
-            lost = losses - self._reported_losses
-            return WARN, f"lost {lost} samples since the last report (see dropped/missing)"
-        return OK, upd.message if upd is not None else "collecting the first window"
+        lost = self._losses() - self._reported_losses
+        level, message = status(self.names, self._channels, self._config.silence_s, silent_s,
+                                tuple(self._events), self._last_update, lost)
+        return Health(level, message, health_values(self._channels, self._resets, self._dropped,
+                                                    self._last_update))

@@ -31,7 +31,7 @@ def pair_channels(
     (tf, vf), (tr, vr) = front, rear
     if tf.size < 3 or tr.size < 3:
         return np.zeros(0, dtype=np.int64), np.zeros((0, 2)), 0.0
-    dt_f, dt_r = float(np.median(np.diff(tf))), float(np.median(np.diff(tr)))
+    dt_f, dt_r = _period(tf), _period(tr)
     tol = cfg.pair_tolerance_s * NS
     same_rate = abs(dt_f - dt_r) <= max(tol, 0.01 * min(dt_f, dt_r))
     slowest = NS / cfg.max_rate_hz
@@ -51,6 +51,14 @@ def pair_channels(
     grid_ns = np.round(grid).astype(np.int64)
     cols = [_resample(t, v, d, grid, dt) for t, v, d in ((tf, vf, dt_f), (tr, vr, dt_r))]
     return grid_ns, np.column_stack(cols), NS / dt
+
+
+def _period(t: np.ndarray) -> float:
+    """A channel's sample period [ns]: its median step, or its mean step when the stamps
+    come in bursts so tight that the median would make a grid far denser than the samples."""
+    median = float(np.median(np.diff(t)))
+    mean = float(t[-1] - t[0]) / (t.size - 1)
+    return median if mean <= 4 * median else mean
 
 
 def _resample(t: np.ndarray, v: np.ndarray, dt_native: float, grid: np.ndarray, dt: float) -> np.ndarray:
@@ -77,16 +85,15 @@ _FIR_HALF_OUT = 10  # the decimating FIR's half length, in output samples
 def _decimate(x: np.ndarray, first: int, q: int, n: int) -> np.ndarray:
     """``n`` samples ``x[first], x[first + q], …``, low-passed (zero phase) below 0.8 x the
     output's Nyquist frequency. The filter reads samples beyond both ends where they exist
-    and an odd reflection (as ``filtfilt`` pads) where they do not."""
+    and an odd reflection (as ``filtfilt`` pads; repeated when the window is shorter than
+    the filter) where they do not."""
     half = _FIR_HALF_OUT * q
     last = first + (n - 1) * q
     lo, hi = max(first - half, 0), min(last + half, x.size - 1)
     seg = x[lo: hi + 1]
     need_lo, need_hi = half - (first - lo), half - (hi - last)
     if need_lo or need_hi:
-        head = 2 * seg[0] - seg[need_lo:0:-1] if need_lo else seg[:0]
-        tail = 2 * seg[-1] - seg[-2:-need_hi - 2:-1] if need_hi else seg[:0]
-        seg = np.concatenate([head, seg, tail])
+        seg = np.pad(seg, (need_lo, need_hi), mode="reflect", reflect_type="odd")
     mean = seg.mean()
     y = signal.resample_poly(seg - mean, 1, q, window=_fir(q))
     return y[_FIR_HALF_OUT: _FIR_HALF_OUT + n] + mean

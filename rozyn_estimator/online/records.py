@@ -87,6 +87,7 @@ def update_values(update: Update) -> dict[str, str]:
         return out
     out["pipeline_ms"] = f"{est.elapsed_ms:.2f}"
     out["stage"] = est.stage
+    out["glitches_front"], out["glitches_rear"] = (str(n) for n in est.glitches)  # gated in the window
     stages = [("", est)] if est.rozyn is None else [("", est), ("rozyn_", est.rozyn)]
     for prefix, stage in stages:
         if stage.ok and stage.params is not None:

@@ -43,5 +43,16 @@ def compute_update(job: Job, names: tuple[str, str], cfg: OnlineConfig, vehicle:
     speed_mps = None if speed is None else float(np.mean(speed))
     if not est.ok:
         return Update(stamp, WARN, f"identification failed: {est.reason}", est, fill, fs, speed_mps)
+    if not _publishable(est):  # never publish a made-up number, whatever the pipeline returns
+        why = f"the pipeline returned a non-finite or non-positive estimate {est.params} or covariance"
+        return Update(stamp, ERROR, f"update failed (internal error, please report): {why}", None, fill, fs,
+                      speed_mps)
     note = "; ".join(est.notes)
     return Update(stamp, WARN if note else OK, note or "estimate published", est, fill, fs, speed_mps)
+
+
+def _publishable(est: Estimate) -> bool:
+    """Finite, positive mass, inertia and CoG distance with a finite covariance."""
+    p, cov = est.params, est.covariance
+    return (p is not None and p.shape == (3,) and bool(np.all(np.isfinite(p)) and np.all(p > 0))
+            and (cov is None or bool(np.all(np.isfinite(cov)))))

@@ -3,7 +3,9 @@
 Each figure is the median over ``repeats`` runs after one warm-up, single BLAS thread
 (as the trials run). Peak memory is the process' maximum resident set size. With
 ``--nodes``, the estimator node under load over DDS instead
-(:mod:`rozyn_estimator.tools.node_bench`).
+(:mod:`rozyn_estimator.tools.node_bench`); with ``--silent-sensor``, the online
+estimator's resident memory over an hour of a 1 kHz front sensor whose rear partner
+never speaks (it must stay flat: each channel holds at most two windows).
 """
 
 from __future__ import annotations
@@ -34,6 +36,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--nodes", action="store_true",
                    help="instead: the estimator node under load over DDS (about 3 minutes)")
     p.add_argument("--quick", action="store_true", help="with --nodes: shorter runs (about 1 minute)")
+    p.add_argument("--silent-sensor", action="store_true",
+                   help="instead: memory over an hour of 1 kHz front samples, the rear silent (seconds)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -42,6 +46,9 @@ def run(args: argparse.Namespace) -> int:
         from rozyn_estimator.tools.node_bench import run_node_bench
 
         print(json.dumps(run_node_bench(quick=args.quick), indent=2))
+        return 0
+    if args.silent_sensor:
+        print(json.dumps([run_silent_sensor_bench(), run_silent_sensor_bench(one_by_one=True)], indent=2))
         return 0
     print(json.dumps(run_bench(repeats=args.repeats), indent=2))
     return 0
@@ -93,6 +100,50 @@ def run_bench(repeats: int = 20) -> dict[str, Any]:
     out["goals"] = {"sim_100s_at_100hz_ms": 20.0, "update_120s_window_ms": 10.0,
                     "refined_update_warm_ms": 100.0, "refined_update_cold_ms": 1000.0}
     return {k: (round(v, 3) if isinstance(v, float) else v) for k, v in out.items()}
+
+
+def run_silent_sensor_bench(hours: float = 1.0, rate_hz: float = 1000.0, every_s: float = 300.0,
+                            one_by_one: bool = False) -> dict[str, Any]:
+    """Resident memory while one sensor is silent: ``hours`` of ``rate_hz`` front samples,
+    the rear never heard, fed through ``add_batch`` a second at a time (as ``rozyn replay``
+    feeds) or, ``one_by_one``, through ``add`` (as the node does).
+
+    Returns:
+        Resident set size [MB] and samples the front channel holds, every ``every_s`` of
+        message time, and the growth over the second half of the run (flat: about 0).
+    """
+    from rozyn_estimator.online import OnlineEstimator
+
+    online = OnlineEstimator(Vehicle())
+    front = online._channels[0]
+    per_s = round(rate_hz)
+    noise = 9.81 + np.random.default_rng(0).standard_normal(per_s)
+    rows = []
+    for second in range(round(hours * 3600)):
+        t = (second * per_s + np.arange(per_s)) * round(1e9 / rate_hz)
+        if one_by_one:
+            for stamp, value in zip(t.tolist(), noise.tolist(), strict=True):
+                online.add(0, stamp, value)
+        else:
+            online.add_batch(np.zeros(per_s, np.int64), t, noise)
+        if (second + 1) % round(every_s) == 0:
+            rows.append({"message_time_s": second + 1, "rss_mb": round(_rss_mb(), 1),
+                         "front_samples_held": int(front.stamps.size + len(front.new_stamps))})
+    half = rows[len(rows) // 2]["rss_mb"]
+    return {
+        "fed": "add, one by one (the node)" if one_by_one else "add_batch, 1 s at a time (rozyn replay)",
+        "rate_hz": rate_hz, "window_s": online.config.window_s, "status": online.health().message,
+        "samples": rows, "rss_growth_second_half_mb": round(rows[-1]["rss_mb"] - half, 1),
+    }
+
+
+def _rss_mb() -> float:
+    """Current resident set size (Linux: /proc; elsewhere the peak)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * resource.getpagesize() / 2**20
+    except OSError:
+        return _peak_rss_mb()
 
 
 def _trial() -> None:

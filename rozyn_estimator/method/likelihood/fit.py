@@ -135,8 +135,10 @@ def refine(
                          speed_mps, cfg, warm)
     except _FitError as exc:
         result = Refinement(status="failed", reason=str(exc))
-    except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
-        result = Refinement(status="failed", reason=f"likelihood fit: {exc}")
+    except (np.linalg.LinAlgError, ArithmeticError, ValueError) as exc:
+        # the model's domain guard (HalfCarSpectrum.spectrum) keeps θ's overflows out; this
+        # is the last line for the rest: a failed status, never an exception to the caller
+        result = Refinement(status="failed", reason=f"likelihood fit: {type(exc).__name__}: {exc}")
     return _with_time(result, started)
 
 

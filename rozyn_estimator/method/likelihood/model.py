@@ -1,6 +1,5 @@
-"""The half car's spectral model: :func:`delay_characteristic` (the wheelbase delay over a
-speed profile) and :class:`HalfCarSpectrum` (the 2x2 spectral matrix of the front/rear
-accelerations on a frequency grid, its parameters θ and its derivatives dS/dθ).
+"""The half car's spectral model: :class:`HalfCarSpectrum` (the 2x2 spectral matrix of the
+front/rear accelerations on a frequency grid, its parameters θ and its derivatives dS/dθ).
 
 Model (all in the frequency domain, vectorised over the grid). Each corner is the
 suspension ``z_s = k_s + iω c_s`` on the wheel ``m_t`` on the tyre ``z_t = k_t + iω c_t``
@@ -42,7 +41,9 @@ from typing import Any, Literal, overload
 
 import numpy as np
 from numpy.polynomial import legendre
+from scipy import special
 
+from rozyn_estimator.method.likelihood.road_input import delay_characteristic
 from rozyn_estimator.vehicle import Vehicle
 
 CORNERS = ("front", "rear")
@@ -50,23 +51,6 @@ CORNERS = ("front", "rear")
 # the suspension's stiffness and damping, the tyre's, the unsprung mass.
 CORNER_TERMS = ("stiffness", "damping", "tyre_stiffness", "tyre_damping", "unsprung_mass")
 _INCOHERENCE_START = 1e-4
-
-
-def delay_characteristic(
-    omega: np.ndarray, wheelbase_m: float, speed_mps: float | np.ndarray
-) -> np.ndarray:
-    """φ(ω) = E[exp(-iωτ)], τ = L/v, over the samples' speeds weighted by speed.
-
-    The road velocity's intensity grows with speed (white in time at ``w = 2``), so a
-    faster stretch weighs more. A constant speed gives the exact wheelbase delay.
-    """
-    v = np.atleast_1d(np.asarray(speed_mps, dtype=float))
-    if np.ptp(v) <= 1e-9 * v.mean():
-        return np.exp(-1j * omega * wheelbase_m / v.mean())
-    # The delays' distribution on 64 bins: cheap, and exact to far below the band.
-    weights, edges = np.histogram(wheelbase_m / v, bins=64, weights=v)
-    tau = 0.5 * (edges[:-1] + edges[1:])
-    return np.exp(-1j * np.multiply.outer(omega, tau)) @ (weights / weights.sum())
 
 
 class HalfCarSpectrum:
@@ -218,8 +202,8 @@ class HalfCarSpectrum:
 
     def physical(self, theta: np.ndarray) -> np.ndarray:
         """(m [kg], I [kg m²], lf [m]) from θ."""
-        p = 1.0 / (1.0 + math.exp(-theta[2]))
-        return np.array([math.exp(theta[0]), math.exp(theta[1]), p * self.wheelbase_m])
+        with np.errstate(over="ignore"):  # inf outside the domain (see :meth:`spectrum`)
+            return np.array([*np.exp(theta[:2]), special.expit(theta[2]) * self.wheelbase_m])
 
     def physical_jacobian(self, theta: np.ndarray) -> np.ndarray:
         """(3, n_params) d(m, I, lf)/dθ."""
@@ -260,7 +244,21 @@ class HalfCarSpectrum:
         ``rows`` only the derivatives by those parameters, in that order.
 
         ``smooth=False``: S on the extended grid (k + 2J), without the taper's smoothing
-        (no derivatives).
+        (no derivatives). Where θ is so far from any vehicle that a value overflows, S and
+        dS are NaN: every likelihood reads that as impossible (the one guard for optimiser
+        steps, warm starts and calibration steps that wander off).
+        """
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            S, dS = self._spectrum(theta, derivatives, smooth, rows)
+        if not (np.all(np.isfinite(S)) and (dS is None or np.all(np.isfinite(dS)))):
+            S = np.full_like(S, np.nan)
+            dS = None if dS is None else np.full_like(dS, np.nan)
+        return S, dS
+
+    def _spectrum(
+        self, theta: np.ndarray, derivatives: bool, smooth: bool, rows: Sequence[str] | None,
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """:meth:`spectrum`'s work.
 
         With ``R = C Cᴴ`` (``C`` the columns of :attr:`inputs`), ``G R Gᴴ = Σ_c g_c g_cᴴ``
         with ``g_c = iω P x_c``, ``x_c = H (T ⊙ C_c)``, ``H = (diag Z - ω² M_ax)⁻¹``: every
@@ -297,7 +295,7 @@ class HalfCarSpectrum:
         iw = 1j * w
         Q = iw * np.einsum("ab,bcf->acf", P, H)  # iω P H
         exponent = ((2.0 - theta[self.index["waviness"]]) if self.estimate_waviness else 0.0) * self.log_shape
-        weight = math.exp(theta[3]) * np.exp(exponent + theta[self.shape_slice] @ self.shape_basis)
+        weight = np.exp(theta[3] + exponent + theta[self.shape_slice] @ self.shape_basis)
         u = [T.T * c for c in self.inputs]  # T ⊙ C_c, each (2, F)
         x = [np.einsum("abf,bf->af", H, uc) for uc in u]
         g = [iw * (P @ xc) for xc in x]
@@ -311,7 +309,7 @@ class HalfCarSpectrum:
         if smooth:
             rank = self._smooth(rank)
         k_inc = self.index.get("ln_incoherence")
-        incoherence = math.exp(theta[k_inc]) if k_inc is not None else 0.0
+        incoherence = np.exp(theta[k_inc]) if k_inc is not None else 0.0
         S_road = rank + incoherence * self._diagonal(rank)
         noise = np.exp(theta[4:6])
         S = S_road.copy()
@@ -386,7 +384,7 @@ class HalfCarSpectrum:
         """The rear sensor's gain and delay as a factor per frequency (None: ideal)."""
         factor = self.rear_factor
         if "ln_rear_gain" in self.index:
-            gain = math.exp(theta[self.index["ln_rear_gain"]])
+            gain = np.exp(theta[self.index["ln_rear_gain"]])
             factor = np.full(self.omega.shape, gain) if factor is None else factor * gain
         if "time_offset_ms" in self.index:
             delay = np.exp(-1e-3j * self.omega * theta[self.index["time_offset_ms"]])
