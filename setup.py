@@ -15,6 +15,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
     # Runtime dependencies come from package.xml (rosdep) or requirements.txt (pip);
     # pinning them here would fight the ROS install.
@@ -27,9 +28,9 @@ setup(
     entry_points={
         "console_scripts": [
             "rozyn = rozyn_estimator.tools.cli:main",
-            "estimator_node = rozyn_estimator.ros.estimator_node:main",
-            "sim_node = sim_node.node:main",
-            "bag_recorder = rozyn_estimator.ros.recorder_node:main",
+            "estimator_node = rozyn_estimator.tools.node_scripts:estimator_node",
+            "sim_node = rozyn_estimator.tools.node_scripts:sim_node",
+            "bag_recorder = rozyn_estimator.tools.node_scripts:bag_recorder",
         ],
     },
 )

@@ -5,6 +5,10 @@ truth (``sim/ground_truth``, transient local), the speed (``sim/speed``), ``/dia
 and, in sim-time mode, ``/clock`` at ``real_time_factor`` times real time (0: as fast as
 it can). Blocks of samples are generated on a steady-clock timer, so memory stays
 bounded however long it runs.
+
+Flow control: code that runs the node in its own process (``rozyn demo``) may set
+:attr:`SimNode.gate`, a callable asked before each block; while it says no, the sim
+holds (sim time stands still), so a consumer that falls behind loses nothing.
 """
 
 from __future__ import annotations
@@ -12,7 +16,7 @@ from __future__ import annotations
 import math
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,7 +36,6 @@ from sim_node.simulation import SimConfig, Simulation
 
 NS = 1_000_000_000
 TIME_MODES = ("realtime", "sim")
-
 
 
 @dataclass(frozen=True)
@@ -90,7 +93,8 @@ class SimNode(Node):
         self._epoch_ns = 0 if self._sim_mode else self.get_clock().now().nanoseconds
         self._wall_start = time.monotonic()
         self.finished = False
-        self.published = 0
+        self.published = 0  # samples per sensor
+        self.gate: Callable[[], bool] | None = None  # produce the next block only when it says yes
 
         sensor_qos = QoSProfile(depth=o.qos_depth, reliability=ReliabilityPolicy.BEST_EFFORT)
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -166,7 +170,7 @@ class SimNode(Node):
         return False
 
     def _tick(self) -> None:
-        if self._waiting():
+        if self._waiting() or (self.gate is not None and not self.gate()):
             return
         n = self._due_samples()
         if n <= 0:
@@ -223,6 +227,7 @@ class SimNode(Node):
 
 def main(args: Sequence[str] | None = None) -> int:
     return ros_common.spin_node(SimNode, args)
+
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -23,7 +23,7 @@ from rclpy.experimental import EventsExecutor
 # from the node benchmark's), chosen by its pid; each module has fixed offsets in it, so
 # the modules of one run never share a domain.
 _DOMAIN_BASE = 10 + (os.getpid() % 21) * 10
-OFFSETS = {"nodes": 0, "recorder": 4, "docs": 7}
+OFFSETS = {"nodes": 0, "recorder": 4, "demo": 6, "docs": 7, "shutdown": 8}
 
 
 def domain(module: str, extra: int = 0) -> int:

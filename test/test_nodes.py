@@ -219,15 +219,23 @@ def test_invalid_parameters_are_refused_at_startup(ros):
      ("estimator_node", "field:=linear_acceleration.w", "no field"),
      ("estimator_node", "field:=header.frame_id", "not a number"),
      ("estimator_node", "update_period_s:=500.0", "update_period_s"),
-     ("sim_node", "road.kind:=gravel", "road.kind")],
+     ("estimator_node", "qos_depth:=abc", "qos_depth"), ("estimator_node", "front_topic:=5", "front_topic"),
+     ("sim_node", "road.kind:=gravel", "road.kind"), ("sim_node", "seed:=abc", "seed"),
+     ("sim_node", "wait_for_subscribers:=7", "wait_for_subscribers"),
+     ("bag_recorder", "qos_depth:=abc", "qos_depth"), ("bag_recorder", "topics:=5", "topics"),
+     ("bag_recorder", "compression:=lzma", "compression"),
+     ("bag_recorder", "flush_period_s:=0.0", "flush_period_s")],
 )
-def test_invalid_parameters_exit_with_a_message(exe, arg, words):
+def test_invalid_parameters_exit_with_a_message(exe, arg, words, tmp_path):
+    """A wrong value or a wrong type, any node: one line naming it, status 2, nothing created."""
     env = dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN + 2))
-    done = subprocess.run([str(BIN / exe), "--ros-args", "-p", arg], env=env, capture_output=True,
+    output = ["-p", f"output:={tmp_path / 'bag'}"] if exe == "bag_recorder" else []
+    done = subprocess.run([str(BIN / exe), "--ros-args", "-p", arg, *output], env=env, capture_output=True,
                           text=True, timeout=30)
     assert done.returncode == 2
     assert words in done.stderr and "Traceback" not in done.stderr
-    assert done.stderr.strip().count("\n") == 0
+    assert done.stderr.strip().count("\n") == 0 and done.stderr.startswith(f"[{exe}] invalid parameter: ")
+    assert not (tmp_path / "bag").exists()
 
 
 def test_runtime_parameter_changes_are_validated(ros):

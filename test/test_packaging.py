@@ -12,7 +12,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 COLCON = Path(sys.executable).parent / "colcon"
-SOURCES = ("package.xml", "setup.py", "setup.cfg", "resource", "rozyn_estimator", "sim_node", "config")
+SOURCES = ("package.xml", "setup.py", "setup.cfg", "resource", "rozyn_estimator", "sim_node", "config",
+           "launch")
 EXECUTABLES = ("estimator_node", "sim_node", "rozyn", "bag_recorder")
 
 
@@ -46,6 +47,8 @@ def test_colcon_build_installs_the_ros_layout(workspace, symlink):
     assert (prefix / "share" / "ament_index" / "resource_index" / "packages" / "rozyn_estimator").is_file()
     assert (prefix / "share" / "rozyn_estimator" / "package.xml").is_file()
     assert (prefix / "share" / "rozyn_estimator" / "config" / "vehicle.yaml").exists()
+    for launch_file in ("sim_estimator.launch.py", "estimator.launch.py"):  # where ros2 launch looks
+        assert (prefix / "share" / "rozyn_estimator" / "launch" / launch_file).exists()
     site = next(prefix.glob("lib/python3*/site-packages"))
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]))
     run = subprocess.run([sys.executable, str(prefix / "lib" / "rozyn_estimator" / "rozyn"), "--help"],

@@ -224,7 +224,8 @@ def test_the_demo_records_and_its_replay_reproduces_the_estimates(tmp_path):
     current defaults. Both run as the user runs them (the same BLAS threading)."""
     env = dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN + 1), PYTHONUNBUFFERED="1")
     done = subprocess.run(
-        [str(BIN / "rozyn"), "demo", "--duration-s", "26", "--window-s", "20", "--bag-dir", str(tmp_path)],
+        [str(BIN / "rozyn"), "demo", "--duration-s", "26", "--window-s", "20", "--bag-dir", str(tmp_path),
+         "--out", str(tmp_path / "demo-out")],
         env=env,
         capture_output=True,
         text=True,

@@ -4,14 +4,24 @@ Subscribes to two ``sensor_msgs/Imu`` topics, feeds the online estimator from th
 callbacks (a dict lookup and a list append per message), runs due updates on a worker
 thread and publishes ``inertia``, ``inertia/covariance`` and ``/diagnostics``. No
 algorithm lives here.
+
+Stopping (:meth:`EstimatorNode.finish`, called by the spin loop after a signal, and by
+``destroy_node``) is ordered: under the lock the worker publishes with, the node stops
+taking samples and publishing updates; an update being computed finishes and is
+dropped, updates not yet started are cancelled, the worker is joined. Only then may the
+node be destroyed and the context shut down, so nothing ever publishes on a context
+that is shutting down.
 """
 
 from __future__ import annotations
 
+import functools
 import sys
+import threading
 import time
-from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
+from collections import deque
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,12 +36,14 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.online import EstimatorConfig, Job, OnlineEstimator, Update
+from rozyn_estimator.online import EstimatorConfig, Health, Job, OnlineEstimator, Update
 from rozyn_estimator.parameters import build, check, param
 from rozyn_estimator.ros import glue as ros_common
 from rozyn_estimator.ros import messages as ros_io
 
 NODE_NAME = "estimator_node"
+MAX_WAITING = 1  # due updates queued behind the one computing (older ones are skipped)
+INERTIA_TOPIC, COVARIANCE_TOPIC = "inertia", "inertia/covariance"  # relative: remappable
 
 
 @dataclass(frozen=True)
@@ -64,21 +76,27 @@ class EstimatorNode(Node):
         )
         self._getter = ros_io.field_getter(cfg.field, Imu)
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="rozyn-update")
+        self._pending: deque[Future[None]] = deque()  # submitted updates, in due order
+        self._publish_lock = threading.Lock()  # the worker publishes, and finish() stops, under it
+        self._stopping = False
+        self._computing: Job | None = None  # the job the worker is on
         self._arrival = [time.monotonic()] * 2  # when each sensor was last heard (wall clock)
         self.finished = False
         self.updates_published = 0
-        self.pending_updates = 0  # due updates not yet published
+        self.updates_skipped = 0  # due updates dropped unstarted because the worker was behind
+        self.received = [0, 0]  # Imu messages that reached the callbacks, front and rear
+        self.on_update: Callable[[Update], None] | None = None  # called (in the worker) after publishing
         qos = QoSProfile(depth=self.options.qos_depth, reliability=ReliabilityPolicy.BEST_EFFORT)
-        self.create_subscription(Imu, cfg.front_topic, lambda m: self._on_imu(0, m), qos)
-        self.create_subscription(Imu, cfg.rear_topic, lambda m: self._on_imu(1, m), qos)
+        subs = [self.create_subscription(Imu, topic, functools.partial(self._on_imu, k), qos)
+                for k, topic in enumerate((cfg.front_topic, cfg.rear_topic))]
         self._subscribe_speed(qos)
-        self.pub_inertia = self.create_publisher(InertiaStamped, "inertia", 10)
-        self.pub_covariance = self.create_publisher(Float64MultiArray, "inertia/covariance", 10)
+        self.pub_inertia = self.create_publisher(InertiaStamped, INERTIA_TOPIC, 10)
+        self.pub_covariance = self.create_publisher(Float64MultiArray, COVARIANCE_TOPIC, 10)
         self.pub_diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_timer(self.options.diagnostics_period_s, self._publish_health)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.get_logger().info(
-            f"estimating from {cfg.front_topic} and {cfg.rear_topic} ({cfg.field}), window "
+            f"estimating from {subs[0].topic_name} and {subs[1].topic_name} ({cfg.field}), window "
             f"{cfg.online.window_s:g} s, update every {cfg.online.update_period_s:g} s"
         )
 
@@ -122,6 +140,9 @@ class EstimatorNode(Node):
         self.create_subscription(msg_type, topic, on_speed, qos)
 
     def _on_imu(self, channel: int, msg: Imu) -> None:
+        if self._stopping:
+            return
+        self.received[channel] += 1
         try:
             value = float(self._getter(msg))
         except (AttributeError, TypeError, ValueError):
@@ -129,18 +150,48 @@ class EstimatorNode(Node):
             return
         self._arrival[channel] = time.monotonic()
         for job in self.online.add(channel, ros_io.stamp_ns(msg.header.stamp), value):
-            self.pending_updates += 1
-            self._worker.submit(self._run, job)
+            self._submit(job)
+
+    def _submit(self, job: Job) -> None:
+        """Queue an update; of those waiting behind the one computing only the newest is
+        kept, so a node that cannot keep up stays live and its memory bounded."""
+        waiting = [f for f in self._pending if not (f.running() or f.done())]
+        for future in waiting[: max(0, len(waiting) + 1 - MAX_WAITING)]:
+            if future.cancel():
+                self.updates_skipped += 1
+                self.get_logger().warning(
+                    f"updates take longer than {self.config.online.update_period_s:g} s of message time: "
+                    f"skipping the older waiting one ({self.updates_skipped} so far)",
+                    throttle_duration_sec=10.0,
+                )
+        self._pending.append(self._worker.submit(self._run, job))
+
+    @property
+    def pending_updates(self) -> int:
+        """Due updates not yet published (queued or computing)."""
+        while self._pending and self._pending[0].done():  # the one worker ends them in order
+            self._pending.popleft()
+        return len(self._pending)
 
     # --------------------------------------------------------------- outputs
     def _run(self, job: Job) -> None:
+        """One update, in the worker: compute, then publish unless the node is stopping."""
+        with self._publish_lock:
+            if self._stopping:
+                return
+            self._computing = job
         try:
             update = self.online.compute(job)
-            self._publish_update(update)
+            with self._publish_lock:
+                if self._stopping:
+                    return
+                self._publish_update(update)
+            if self.on_update is not None:
+                self.on_update(update)
         except Exception as exc:  # a bug must not kill the node silently
             self.get_logger().error(f"update at {job.due_ns / 1e9:.3f} s failed: {exc!r}")
         finally:
-            self.pending_updates -= 1
+            self._computing = None
 
     def _publish_update(self, update: Update) -> None:
         if update.published:
@@ -155,12 +206,37 @@ class EstimatorNode(Node):
         now = self.get_clock().now().nanoseconds
         wall = time.monotonic()
         health = self.online.report(silent_s=(wall - self._arrival[0], wall - self._arrival[1]))
+        values = {**health.values, "updates_skipped": str(self.updates_skipped)}
+        health = Health(health.level, health.message, values)
         self.pub_diagnostics.publish(
             ros_io.diagnostic_array(health, self.get_fully_qualified_name(), self.config.hardware_id, now)
         )
 
-    def destroy_node(self) -> None:
+    def finish(self, executor: Any = None) -> int:
+        """Stop: take no more samples, publish nothing more, let an update being computed
+        end unpublished, cancel those not started, join the worker (idempotent).
+
+        Args:
+            executor: unused (the spin loop's protocol).
+
+        Returns:
+            0 (the exit status).
+        """
+        with self._publish_lock:  # a publish in progress completes first
+            if self._stopping:
+                return 0
+            self._stopping = True
+            computing = self._computing
+        queued = self.pending_updates - (computing is not None)
+        if computing is not None or queued > 0:
+            what = f"during the update at {computing.due_ns / 1e9:.3f} s (its result is not published)" \
+                if computing is not None else "between updates"
+            self.get_logger().info(f"stopping {what}; {max(queued, 0)} due updates not started are dropped")
         self._worker.shutdown(wait=True, cancel_futures=True)
+        return 0
+
+    def destroy_node(self) -> None:
+        self.finish()
         super().destroy_node()
 
 

@@ -1,11 +1,13 @@
-"""ROS glue shared by both nodes: parameter descriptors, the vehicle parameters, the
-spin loop with a clean shutdown.
+"""ROS glue shared by the nodes: parameter descriptors, the vehicle parameters, the
+spin loop with a clean, ordered shutdown.
 
 It holds no algorithm, so the simulator node may import it (DESIGN.md boundaries).
 """
 
 from __future__ import annotations
 
+import contextlib
+import signal
 import sys
 from collections.abc import Iterable, Sequence
 from typing import Any
@@ -13,13 +15,14 @@ from typing import Any
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 
 from rozyn_estimator import parameters
-from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.errors import ConfigError, RozynError
 from rozyn_estimator.parameters import Param
+from rozyn_estimator.ros.stop import StopRequest
 
 VEHICLE_FILE_HELP = "vehicle YAML (flat or ROS params); when set it overrides the vehicle.* parameters"
 
@@ -72,38 +75,66 @@ def values_of(node: Node, names: Iterable[str]) -> dict[str, Any]:
     return {p.name: p.value for p in node.get_parameters(list(names))}
 
 
-def spin_node(node_factory: Any, args: Sequence[str] | None = None) -> int:
-    """Init, create the node, spin until SIGINT/SIGTERM, shut down cleanly (exit 0).
+SPIN_TIMEOUT_S = 0.1  # how soon the loop sees a stop request
 
-    Invalid parameters are reported in one line naming the parameter (exit 2).
+
+def spin_node(node_factory: Any, args: Sequence[str] | None = None, stop: StopRequest | None = None) -> int:
+    """Init, create the node, spin until SIGINT/SIGTERM (or the node is ``finished``), stop
+    it in order; the exit status: 0, or what the node's ``finish`` returns.
+
+    Shutdown is deterministic: rclpy installs no signal handler, so nothing shuts the
+    context down under a running callback or worker; a signal only sets ``stop`` (installed
+    here unless the console script installed it before its imports). The loop then ends,
+    the node's ``finish(executor)`` stops its work (the estimator stops taking new updates,
+    publishes nothing more and joins its worker; the recorder drains and closes its bag),
+    and only then are the node destroyed and the context shut down. A signal during
+    start-up is seen before the first spin: the node is created, finished and destroyed.
+    A ``stop`` passed in stays installed (its owner restores it); one made here is
+    restored on return.
+
+    An invalid parameter (or ``--ros-args``) is reported in one line naming it (exit 2).
     """
     name = getattr(node_factory, "NAME", "node")
-    try:
-        rclpy.init(args=None if args is None else list(args))
-    except _rclpy.RCLError as exc:  # malformed --ros-args
-        print(f"[{name}] invalid arguments: {str(exc).split(', at ')[0]}", file=sys.stderr)
-        return 2
-    node = None
-    try:
+    with contextlib.nullcontext(stop) if stop is not None else StopRequest() as request:
         try:
-            node = node_factory()
-        except (ConfigError, ParameterException) as exc:
-            reason = str(exc)
-            if isinstance(exc, ParameterException):  # rclpy: "... Reason: <why>: <name>"
-                reason = reason.split("Reason: ")[-1]
-            print(f"[{name}] invalid parameter: {reason}", file=sys.stderr)
+            rclpy.init(
+                args=None if args is None else list(args), signal_handler_options=SignalHandlerOptions.NO
+            )
+        except _rclpy.RCLError as exc:  # malformed --ros-args
+            print(f"[{name}] invalid arguments: {str(exc).split(', at ')[0]}", file=sys.stderr)
             return 2
-        executor = _executor()
-        executor.add_node(node)
-        while rclpy.ok() and not getattr(node, "finished", False):
-            executor.spin_once(timeout_sec=0.2)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+        node = executor = None
+        try:
+            try:
+                node = node_factory()
+            except (ConfigError, ParameterException) as exc:
+                print(f"[{name}] invalid parameter: {parameter_error(exc)}", file=sys.stderr)
+                return 2
+            except RozynError as exc:  # e.g. the recorder's bag cannot be created
+                print(f"[{name}] {exc}", file=sys.stderr)
+                return 2
+            executor = _executor()
+            executor.add_node(node)
+            while not request.requested and not getattr(node, "finished", False) and rclpy.ok():
+                executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+            if request.signal is not None:
+                node.get_logger().info(f"{signal.Signals(request.signal).name}: stopping")
+            finish = getattr(node, "finish", None)
+            return int(finish(executor) or 0) if finish is not None else 0
+        finally:
+            if node is not None:
+                node.destroy_node()
+            if executor is not None:
+                executor.shutdown()
+            rclpy.try_shutdown()
+
+
+def parameter_error(exc: Exception) -> str:
+    """One line naming the parameter: ConfigError's own, or rclpy's refusal (a wrong type)."""
+    reason = str(exc)
+    if isinstance(exc, ParameterException):  # rclpy: "... Reason: <why>: <name>"
+        reason = reason.split("Reason: ")[-1]
+    return " ".join(reason.split())
 
 
 def _executor() -> Any:

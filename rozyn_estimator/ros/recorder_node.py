@@ -24,9 +24,7 @@ from __future__ import annotations
 
 import functools
 import importlib
-import signal
 import sys
-import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -34,17 +32,15 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-import rclpy
 from rcl_interfaces.srv import GetParameters, ListParameters
 from rclpy.clock import Clock, ClockType
 from rclpy.expand_topic_name import expand_topic_name
 from rclpy.node import Node
 from rclpy.parameter import parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 
 from rozyn_estimator.bag import BagWriter, Qos, QueuedBagWriter
-from rozyn_estimator.errors import BagError, ConfigError
+from rozyn_estimator.errors import BagError
 from rozyn_estimator.online import CUSTOM_DATA_KEY, EstimatorConfig
 from rozyn_estimator.parameters import build, check, param
 from rozyn_estimator.ros import glue as ros_common
@@ -61,7 +57,6 @@ DEFAULT_TOPICS = (
     "/clock",
 )
 NS = 1_000_000_000
-
 
 
 @dataclass(frozen=True)
@@ -167,6 +162,8 @@ class BagRecorder(Node):
         self.path = Path(p.output) if p.output else bag_path(p.bag_root, p.name)
         self._wanted = {self._resolve(t) for t in p.topics}
         self._recorded: dict[str, str] = {}  # topic -> type
+        self._topic_ids: dict[str, int] = {}
+        self._received: list[int] = []  # messages received, per topic id
         self._refused: set[str] = set()
         self._last_log_ns = 0
         self.estimator_config: EstimatorConfig | None = None
@@ -223,6 +220,8 @@ class BagRecorder(Node):
             type_hash=None if type_hash == "INVALID" else type_hash,
         )
         self._recorded[topic] = msgtype
+        self._topic_ids[topic] = tid
+        self._received += [0] * (tid + 1 - len(self._received))
         self.create_subscription(
             cls,
             topic,
@@ -233,6 +232,7 @@ class BagRecorder(Node):
         self.get_logger().info(f"recording {topic} ({msgtype})")
 
     def _on_message(self, topic_id: int, data: bytes) -> None:
+        self._received[topic_id] += 1
         t = max(self.get_clock().now().nanoseconds, self._last_log_ns + 1)  # bag order = arrival order
         self._last_log_ns = t
         self.writer.write(topic_id, t, data)
@@ -293,6 +293,11 @@ class BagRecorder(Node):
     def recorded_topics(self) -> dict[str, str]:
         return dict(self._recorded)
 
+    def received(self, topic: str) -> int:
+        """Messages received on a (resolved) topic so far; 0 if it is not recorded."""
+        tid = self._topic_ids.get(topic)
+        return 0 if tid is None else self._received[tid]
+
     def close(self) -> None:
         """Write everything received, finish the bag (idempotent)."""
         if self.closed:
@@ -309,9 +314,23 @@ class BagRecorder(Node):
         if self.writer.error is not None:
             raise BagError(f"writing {self.path} failed: {self.writer.error}")
 
+    def finish(self, executor: Any) -> int:
+        """After the spin loop: write what the middleware already received, close the bag,
+        print its path; the exit status (1 if writing failed)."""
+        drain(executor, self.writer)
+        try:
+            self.close()
+        except BagError as exc:
+            print(f"[{self.NAME}] {exc}", file=sys.stderr)
+            return 1
+        print(self.path, flush=True)
+        return 0
+
     def destroy_node(self) -> None:
-        self.close()
-        super().destroy_node()
+        try:
+            self.close()
+        finally:
+            super().destroy_node()
 
 
 def _hidden(topic: str) -> bool:
@@ -331,39 +350,7 @@ def drain(executor: Any, writer: QueuedBagWriter, quiet_s: float = 0.1, limit_s:
 
 def main(args: Sequence[str] | None = None) -> int:
     """Run until SIGINT/SIGTERM, then drain, close the bag and print its path (exit 0)."""
-    stop = threading.Event()
-    try:
-        rclpy.init(args=None if args is None else list(args), signal_handler_options=SignalHandlerOptions.NO)
-    except Exception as exc:  # malformed --ros-args
-        print(f"[{NODE_NAME}] invalid arguments: {str(exc).split(', at ')[0]}", file=sys.stderr)
-        return 2
-    previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
-    node = None
-    try:
-        try:
-            node = BagRecorder()
-        except (ConfigError, BagError) as exc:
-            print(f"[{NODE_NAME}] {exc}", file=sys.stderr)
-            return 2
-        from rclpy.experimental import EventsExecutor
-
-        executor = EventsExecutor()
-        executor.add_node(node)
-        while not stop.is_set() and not node.finished:
-            executor.spin_once(timeout_sec=0.1)
-        drain(executor, node.writer)
-        node.close()
-        print(node.path, flush=True)
-        return 1 if node.writer.error is not None else 0
-    except BagError as exc:
-        print(f"[{NODE_NAME}] {exc}", file=sys.stderr)
-        return 1
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+    return ros_common.spin_node(BagRecorder, args)
 
 
 if __name__ == "__main__":

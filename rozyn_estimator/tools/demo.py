@@ -11,17 +11,27 @@ estimator's outputs and the estimator's configuration, so ``rozyn replay`` on th
 reproduces the estimates printed here. The sim starts only once the estimator and the
 recorder are subscribed to it. SIGINT or SIGTERM stops the run cleanly: the bag is
 closed with everything received.
+
+Flow control (:class:`Pacer`): the sim runs at ``--real-time-factor`` at most, and
+holds whenever the estimator or the recorder has not yet taken in what it published, or
+an update is due while the last one still computes. A slow or loaded machine slows the
+demo down (the summary says by how much) instead of losing samples.
+
+The updates are written to ``<out>/updates.csv`` as ``rozyn replay`` writes them, and
+drawn in ``<out>/estimates.png`` (:mod:`rozyn_estimator.tools.replay_plot`).
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import shutil
 import signal
 import sys
 import threading
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -43,6 +53,48 @@ class _Seen:
     printed: set[int] = field(default_factory=set)
     lines: list[str] = field(default_factory=list)
     last_status: str = ""
+
+
+class Pacer:
+    """The simulator's gate (:attr:`sim_node.node.SimNode.gate`): the next block only once
+    every consumer has taken in all but ``ahead`` samples of each sensor, and at most one
+    update is waiting (so the printed estimates stay live).
+
+    A consumer that has taken in nothing more for ``stall_s`` while behind no longer
+    holds the sim: what it misses was lost on the way, not late (its diagnostics count
+    it as missing).
+
+    Args:
+        sim: the simulator node (``published``: samples per sensor so far).
+        estimator: the estimator node (``received``, ``pending_updates``).
+        intakes: further counts of samples taken in (e.g. the recorder's, per sensor).
+    """
+
+    def __init__(self, sim: Any, estimator: Any, intakes: Sequence[Callable[[], int]] = (),
+                 ahead: int = 50, stall_s: float = 2.0) -> None:
+        self._sim, self._est = sim, estimator
+        self._intakes = [lambda: min(estimator.received), *intakes]
+        self._ahead, self._stall_s = ahead, stall_s
+        self._taken, self._progress_at = -1, time.monotonic()
+        self._held_since: float | None = None
+        self.held_s = 0.0  # wall time the sim was held
+        self.max_pending = 0  # most updates waiting at once
+
+    def __call__(self) -> bool:
+        now = time.monotonic()
+        taken = min(count() for count in self._intakes)
+        if taken != self._taken:
+            self._taken, self._progress_at = taken, now
+        behind = self._sim.published - taken > self._ahead and now - self._progress_at < self._stall_s
+        pending = self._est.pending_updates
+        self.max_pending = max(self.max_pending, pending)
+        go = not behind and pending <= 1
+        if go and self._held_since is not None:
+            self.held_s += now - self._held_since
+            self._held_since = None
+        elif not go and self._held_since is None:
+            self._held_since = now
+        return go
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -69,6 +121,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--bag", metavar="DIR", help="record the run to exactly DIR (not --bag-dir/demo-<UTC>)")
     p.add_argument("--no-record", action="store_true", help="do not record the run")
+    p.add_argument(
+        "--out", metavar="DIR",
+        help="write updates.csv and estimates.png to DIR (default: out/demo/<the bag's name>)",
+    )
+    p.add_argument(
+        "--plot", action=argparse.BooleanOptionalAction, default=None,
+        help="draw estimates.png (default: when matplotlib is installed)",
+    )
 
 
 def _row(label: str, value: float, std: float, truth: float, digits: int) -> str:
@@ -149,13 +209,16 @@ def run(args: argparse.Namespace) -> int:
         parameter_overrides=[Parameter("use_sim_time", value=True),
                              *(Parameter(k, value=v) for k, v in estimator_values.items())],
     )
+    updates: list[Any] = []
+    est.on_update = updates.append
+    bag = Path(args.bag) if args.bag else bag_path(args.bag_dir, "demo")
     recorder = None
     if not args.no_record:
         recorder = BagRecorder(
             context=ctx,
             parameter_overrides=[
                 Parameter("use_sim_time", value=True),
-                Parameter("output", value=args.bag or str(bag_path(args.bag_dir, "demo"))),
+                Parameter("output", value=str(bag)),
                 Parameter("estimator_node", value=est.get_fully_qualified_name()),
                 Parameter("qos_depth", value=QUEUE_DEPTH),
             ],
@@ -164,6 +227,9 @@ def run(args: argparse.Namespace) -> int:
         context=ctx,
         parameter_overrides=[Parameter(k, value=v) for k, v in sim_values.items()],
     )
+    pacer = Pacer(sim, est, [] if recorder is None else
+                  [functools.partial(recorder.received, t) for t in ("/accel/front", "/accel/rear")])
+    sim.gate = pacer
     nodes = [n for n in (probe, est, recorder) if n is not None]
     for node in nodes:
         executor.add_node(node)
@@ -182,11 +248,11 @@ def run(args: argparse.Namespace) -> int:
         while not sim.finished and not stop.is_set():
             executor.spin_once(timeout_sec=0.05)
             _print_new(seen)
-        end = time.monotonic() + 120.0  # updates still computing: let them finish
+        end = time.monotonic() + 120.0  # updates still computing or on their way: let them come
         while (
             time.monotonic() < end
             and not stop.is_set()
-            and (est.pending_updates or set(seen.inertia) - seen.printed)
+            and (est.pending_updates or len(set(seen.inertia) & set(seen.covariance)) < est.updates_published)
         ):
             executor.spin_once(timeout_sec=0.05)
             _print_new(seen)
@@ -204,7 +270,8 @@ def run(args: argparse.Namespace) -> int:
         executor.shutdown()
         rclpy.try_shutdown(context=ctx)
         _restore_signals(previous)
-    code = _summary(seen, args, wall)
+    code = _summary(seen, args, wall, pacer)
+    _write_outputs(Path(args.out) if args.out else Path("out", "demo", bag.name), updates, seen, args)
     if recorder is not None:
         total = sum(recorder.writer.writer.counts.values())
         print(
@@ -284,17 +351,44 @@ def _print_new(seen: _Seen) -> None:
         print(line, flush=True)
 
 
-def _summary(seen: _Seen, args: argparse.Namespace, wall_s: float) -> int:
+def _summary(seen: _Seen, args: argparse.Namespace, wall_s: float, pacer: Pacer) -> int:
     print()
     if seen.truth is not None:
         t = seen.truth.inertia
         print(f"truth: m = {t.m:g} kg, Iyy = {t.iyy:g} kg m², lf = {-t.com.x:g} m")
+    print(f"the simulator waited {pacer.held_s:.1f} s for the estimator and the recorder "
+          f"(at most {pacer.max_pending} updates waiting)")
     if not seen.printed:
         print(f"no estimate was published ({seen.last_status or 'no diagnostics'})")
         return 1
     last = seen.lines[-1]
-    print(f"{len(seen.printed)} estimates in {wall_s:.1f} s wall time; last: {last}")
+    print(f"{len(seen.printed)} estimates in {wall_s:.1f} s wall time "
+          f"({args.duration_s / wall_s:.1f}x real time); last: {last}")
     return 0
+
+
+def _write_outputs(out_dir: Path, updates: Sequence[Any], seen: _Seen, args: argparse.Namespace) -> None:
+    """``updates.csv`` as ``rozyn replay`` writes it, and ``estimates.png``; prints their paths."""
+    import csv
+
+    from rozyn_estimator.tools.replay_outputs import CSV_COLUMNS, ReplayedUpdate, csv_row
+    from rozyn_estimator.tools.replay_plot import PLOT_NAME, matplotlib_available, plot_estimates
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with (out_dir / "updates.csv").open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(CSV_COLUMNS)
+        for update in sorted(updates, key=lambda u: u.stamp_ns):
+            writer.writerow(csv_row(ReplayedUpdate(update, update.stamp_ns)))
+    print(f"\nwrote {out_dir / 'updates.csv'}")
+    if args.plot is False or not updates or (args.plot is None and not matplotlib_available()):
+        return
+    t = seen.truth.inertia if seen.truth is not None else None
+    png = plot_estimates(
+        out_dir / "updates.csv", out_dir / PLOT_NAME, truth=None if t is None else (t.m, t.iyy, -t.com.x),
+        title=f"rozyn demo: {args.road} road ({args.amplitudes}), {args.speed_kmh:g} km/h",
+    )
+    print(f"plot: {png}")
 
 
 HELP = "the main job: sim and estimator nodes on sim time, estimate vs truth"

@@ -17,6 +17,7 @@ from __future__ import annotations
 import csv
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -67,6 +68,13 @@ class ReplayResult:
     damage: list[str] = field(default_factory=list)
     dropped: dict[str, int] = field(default_factory=dict)
     resets: int = 0
+    span_ns: tuple[int, int] | None = None  # the accelerometer messages' first and last stamp
+    plot: Path | None = None  # estimates.png, when drawn
+
+    @property
+    def duration_s(self) -> float:
+        """Message time from the first to the last accelerometer stamp."""
+        return (self.span_ns[1] - self.span_ns[0]) / NS if self.span_ns else 0.0
 
     @property
     def messages_per_s(self) -> float:
@@ -77,6 +85,11 @@ class ReplayResult:
     def published(self) -> list[ReplayedUpdate]:
         """The updates that published an estimate."""
         return [u for u in self.updates if u.update.published]
+
+
+def utc() -> str:
+    """Now, for output directory names: ``20261122T101500Z``."""
+    return datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
 
 
 def published_estimate(update: Update) -> Estimate | None:

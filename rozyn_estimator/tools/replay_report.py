@@ -69,6 +69,8 @@ def format_summary(result: ReplayResult) -> str:
             f"wrote {result.out_dir / 'updates.csv'}"
             + (f" and {result.out_dir / 'estimates'} ({counts})" if counts else ""),
         ]
+    if result.plot is not None:
+        lines.append(f"plot: {result.plot}")
     return "\n".join(lines)
 
 

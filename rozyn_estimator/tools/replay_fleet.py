@@ -1,0 +1,280 @@
+"""``rozyn replay`` of a fleet: several bags, or directories of bags, in parallel.
+
+Each bag is replayed exactly as ``rozyn replay BAG`` does it
+(:func:`~rozyn_estimator.tools.replay_feed.replay_bag`) into ``<out>/<bag name>/``
+(``updates.csv``, ``estimates/``, ``estimates.png``), on all local cores
+(:func:`~rozyn_estimator.tools.trial.parallel_map`) or on the workers of a Dask cluster
+(``--scheduler``, as ``rozyn study``: :func:`~rozyn_estimator.tools.study.work.connect_scheduler`).
+One progress bar counts the bags; then one table (per bag: duration, last estimate ± std,
+status, warnings) and ``<out>/fleet.csv`` with the same and more.
+
+A bag that cannot be replayed (damaged, truncated, foreign, no accelerometer topic, no
+update due) is a ``failed`` row saying why; it never stops the others. The exit status
+is 1 if any bag failed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from rozyn_estimator.bag.reader import BAG_SUFFIXES
+from rozyn_estimator.errors import BagError
+from rozyn_estimator.online import LEVEL_NAMES, OK
+from rozyn_estimator.tools.replay_feed import ReplayOptions, check_options, replay_bag
+from rozyn_estimator.tools.replay_outputs import ReplayResult, published_estimate, utc
+
+FLEET_CSV = "fleet.csv"
+STATUSES = ("ok", "no estimate", "failed")  # an estimate published / none published / not replayed
+PARAMS = ("mass_kg", "pitch_inertia_kgm2", "cog_from_front_axle_m")
+
+
+@dataclass(frozen=True)
+class FleetTask:
+    """One bag to replay into ``out_dir`` (picklable: it travels to worker processes)."""
+
+    bag: Path
+    out_dir: Path
+    options: ReplayOptions
+
+
+@dataclass(frozen=True)
+class FleetRow:
+    """What one bag gave: a row of the table and of ``fleet.csv``.
+
+    Estimates, their std and the truth are in (m [kg], I_yy [kg m²], l_f [m]) order;
+    ``warnings`` sums up what went wrong short of failing, ``error`` why a bag failed.
+    """
+
+    bag: str
+    status: str
+    duration_s: float | None = None
+    updates: int = 0
+    published: int = 0
+    failed_updates: int = 0
+    warned_updates: int = 0
+    estimate: tuple[float, float, float] | None = None
+    std: tuple[float, float, float] | None = None
+    truth: tuple[float, float, float] | None = None
+    warnings: str = ""
+    error: str = ""
+    out_dir: str = ""
+    plot: str = ""
+    wall_s: float = 0.0
+
+    @classmethod
+    def from_result(cls, bag: Path, result: ReplayResult, wall_s: float) -> FleetRow:
+        updates = [ru.update for ru in result.updates]
+        published = [u for u in updates if u.published]
+        failed = sum(1 for u in updates if not u.published and u.level != OK)
+        warned = sum(1 for u in published if u.level != OK)
+        last = published_estimate(published[-1]) if published else None
+        notes = [f"{failed} updates failed"] if failed else []
+        notes += [f"{warned} warned"] if warned else []
+        notes += [f"{result.resets} window resets"] if result.resets else []
+        dropped = sum(result.dropped.values())
+        notes += [f"{dropped} samples dropped"] if dropped else []
+        notes += [f"salvaged ({len(result.damage)} damaged)"] if result.damage else []
+        notes += ["no recorded configuration"] if "recorded in the bag" not in result.config_source else []
+        if not published and updates:
+            notes.append(f"last: {LEVEL_NAMES[updates[-1].level]} {updates[-1].message}")
+        return cls(
+            bag=str(bag),
+            status="ok" if published else ("no estimate" if updates else "failed"),
+            duration_s=result.duration_s,
+            updates=len(updates),
+            published=len(published),
+            failed_updates=failed,
+            warned_updates=warned,
+            estimate=_triple(last.params) if last is not None and last.params is not None else None,
+            std=_triple(last.std) if last is not None and last.std is not None else None,
+            truth=result.truth,
+            warnings="; ".join(notes),
+            error="" if updates else f"no update fell due ({result.accel_messages} accelerometer messages)",
+            out_dir=str(result.out_dir or ""),
+            plot=str(result.plot or ""),
+            wall_s=wall_s,
+        )
+
+
+def _triple(values: Any) -> tuple[float, float, float]:
+    a, b, c = (float(v) for v in values)
+    return a, b, c
+
+
+def is_bag(path: Path) -> bool:
+    """A bag file, or a directory holding ``metadata.yaml`` or bag files."""
+    if path.is_file():
+        return path.suffix in BAG_SUFFIXES
+    return path.is_dir() and (
+        (path / "metadata.yaml").is_file() or any(p.suffix in BAG_SUFFIXES for p in path.iterdir())
+    )
+
+
+def find_bags(paths: Sequence[Path]) -> list[Path]:
+    """The bags to replay: each path that is a bag (or not a directory: its row will say
+    what it is), and every bag under a directory that is not one, in name order.
+
+    Args:
+        paths: the command line's.
+
+    Returns:
+        The bags, in the order given.
+    """
+    out: list[Path] = []
+    for path in paths:
+        if is_bag(path) or not path.is_dir():
+            out.append(path)
+            continue
+        found = sorted(p for p in path.rglob("*") if is_bag(p) and not any(is_bag(q) for q in p.parents))
+        out.extend(found or [path])
+    return out
+
+
+def replay_task(task: FleetTask) -> FleetRow:
+    """Replay one bag (in a worker process, a Dask worker or here); never raises."""
+    from rozyn_estimator.tools.study.work import one_blas_thread
+
+    one_blas_thread()
+    started = time.perf_counter()
+    try:
+        result = replay_bag(task.bag, task.out_dir, task.options)
+    except Exception as exc:  # a damaged or foreign bag, or a bug: one row, the others go on
+        text = str(exc) if isinstance(exc, BagError | ValueError) else f"{type(exc).__name__}: {exc}"
+        return FleetRow(str(task.bag), "failed", error=" ".join(text.split()), out_dir=str(task.out_dir),
+                        wall_s=time.perf_counter() - started)
+    return FleetRow.from_result(task.bag, result, time.perf_counter() - started)
+
+
+def plan(bags: Sequence[Path], out: Path, options: ReplayOptions) -> list[FleetTask]:
+    """One task per bag, each into ``out/<bag name>`` (``-2``, ``-3`` … when names repeat)."""
+    tasks, used = [], set()
+    for bag in bags:
+        name = bag.stem if bag.is_file() else bag.name
+        unique, k = name, 2
+        while unique in used:
+            unique, k = f"{name}-{k}", k + 1
+        used.add(unique)
+        tasks.append(FleetTask(bag, out / unique, options))
+    return tasks
+
+
+def run_fleet(bags: Sequence[Path], args: argparse.Namespace) -> int:
+    """Replay ``bags`` in parallel, print the table, write ``fleet.csv``.
+
+    Args:
+        bags: the bags (:func:`find_bags`).
+        args: ``rozyn replay``'s parsed options.
+
+    Returns:
+        1 if any bag failed, else 0.
+
+    Raises:
+        BagError: the output directory holds a fleet replay already.
+        ConfigError: the Dask scheduler cannot be reached.
+    """
+    out = Path(args.out) if args.out else Path("out", "replay", f"fleet-{utc()}")
+    if (out / FLEET_CSV).exists():
+        raise BagError(f"{out} holds a fleet replay already; choose another --out")
+    options = ReplayOptions.from_args(args)
+    check_options(options)  # a bad option fails once, not once per bag
+    tasks = plan(bags, out, options)
+    progress = not args.quiet and sys.stderr.isatty()
+    started = time.perf_counter()
+    rows = list(_dask_rows(tasks, args.scheduler, progress) if args.scheduler
+                else _local_rows(tasks, args.jobs, progress))
+    out.mkdir(parents=True, exist_ok=True)
+    write_fleet_csv(out / FLEET_CSV, rows)
+    failed = sum(r.status == "failed" for r in rows)
+    if not args.quiet:
+        print(format_table(rows))
+        print(f"\n{len(rows)} bags in {time.perf_counter() - started:.1f} s "
+              f"({args.scheduler or 'local processes'}): {len(rows) - failed} replayed, {failed} failed; "
+              f"wrote {out / FLEET_CSV}")
+    if failed:
+        print(f"rozyn replay: {failed} of {len(rows)} bags failed (see the table)", file=sys.stderr)
+    return 1 if failed else 0
+
+
+def _local_rows(tasks: Sequence[FleetTask], jobs: int | None, progress: bool) -> Iterator[FleetRow]:
+    from rozyn_estimator.tools.trial import parallel_map
+
+    yield from parallel_map(replay_task, tasks, jobs, progress, "bag")
+
+
+def _dask_rows(tasks: Sequence[FleetTask], address: str, progress: bool) -> list[FleetRow]:
+    """The rows in task order, computed on the cluster's workers (as they finish)."""
+    from distributed import as_completed
+    from tqdm import tqdm
+
+    from rozyn_estimator.tools.study.work import connect_scheduler
+
+    client = connect_scheduler(address)
+    rows: dict[int, FleetRow] = {}
+    try:
+        futures = client.map(replay_task, tasks, pure=False)
+        index = {f.key: i for i, f in enumerate(futures)}
+        with tqdm(total=len(tasks), unit="bag", disable=not progress, leave=False, file=sys.stderr) as bar:
+            for future in as_completed(futures, loop=client.loop):
+                i = index[future.key]
+                try:
+                    rows[i] = future.result()
+                except Exception as exc:  # the worker died: that bag fails, the others go on
+                    rows[i] = FleetRow(str(tasks[i].bag), "failed", error=f"{type(exc).__name__}: {exc}")
+                bar.update(1)
+    finally:
+        client.close()
+    return [rows[i] for i in range(len(tasks))]
+
+
+CSV_COLUMNS = (
+    "bag", "status", "duration_s", "updates", "published", "failed_updates", "warned_updates",
+    *PARAMS, *(f"{p}_std" for p in PARAMS), *(f"truth_{p}" for p in PARAMS),
+    "warnings", "error", "out_dir", "plot", "wall_s",
+)
+
+
+def write_fleet_csv(path: Path, rows: Sequence[FleetRow]) -> None:
+    """``fleet.csv``: :data:`CSV_COLUMNS`, one row per bag (numbers at full precision)."""
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, CSV_COLUMNS)
+        writer.writeheader()
+        for row in rows:
+            cells = {k: v for k, v in asdict(row).items() if k not in ("estimate", "std", "truth")}
+            for key, prefix, suffix in (("estimate", "", ""), ("std", "", "_std"), ("truth", "truth_", "")):
+                values = getattr(row, key)
+                cells |= {f"{prefix}{p}{suffix}": values[i] if values else None for i, p in enumerate(PARAMS)}
+            writer.writerow({k: _cell(v) for k, v in cells.items()})
+
+
+def _cell(v: Any) -> Any:
+    return repr(float(v)) if isinstance(v, float) else ("" if v is None else v)
+
+
+DIGITS = (1, 1, 4)  # decimals of m, I_yy, l_f in the table
+
+
+def format_table(rows: Sequence[FleetRow], width: int = 70) -> str:
+    """The summary table: bag, duration, last estimate ± std, status, warnings (or the error)."""
+    head = (f"{'bag':<28} {'duration':>9}  {'m [kg]':>16} {'I_yy [kg m²]':>17} {'l_f [m]':>17}  "
+            f"{'status':<11} warnings")
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        name = Path(r.bag).name or r.bag
+        name = name if len(name) <= 28 else "…" + name[-27:]
+        duration = f"{r.duration_s:8.1f}s" if r.duration_s is not None else f"{'–':>9}"
+        cells = ["–"] * 3
+        if r.estimate is not None:
+            std = r.std or (float("nan"),) * 3
+            cells = [f"{v:.{d}f} ± {s:.{d}f}" for v, s, d in zip(r.estimate, std, DIGITS, strict=True)]
+        note = r.error.replace(r.bag, Path(r.bag).name) if r.status == "failed" else r.warnings
+        note = note if len(note) <= width else note[: width - 1] + "…"
+        lines.append(f"{name:<28} {duration}  {cells[0]:>16} {cells[1]:>17} {cells[2]:>17}  "
+                     f"{r.status:<11} {note}")
+    return "\n".join(lines)
