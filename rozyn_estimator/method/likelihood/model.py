@@ -43,10 +43,10 @@ import numpy as np
 from numpy.polynomial import legendre
 from scipy import special
 
+from rozyn_estimator.method.likelihood.corners import CORNERS, CornerState, corner_outer
 from rozyn_estimator.method.likelihood.road_input import delay_characteristic
 from rozyn_estimator.vehicle import Vehicle
 
-CORNERS = ("front", "rear")
 # Corner values θ can hold as log scale factors (``ln_<term>_<corner>``), in θ's order:
 # the suspension's stiffness and damping, the tyre's, the unsprung mass.
 CORNER_TERMS = ("stiffness", "damping", "tyre_stiffness", "tyre_damping", "unsprung_mass")
@@ -271,6 +271,7 @@ class HalfCarSpectrum:
         ks = self.ks0 * scale["stiffness"] if "stiffness" in scale else self.ks0
         cs = self.cs0 * scale["damping"] if "damping" in scale else self.cs0
         zt, wt = self.z_tyre, self.w_tyre
+        kt, ct, mt = self.kt0, self.ct0, self.mt0
         if {"tyre_stiffness", "tyre_damping", "unsprung_mass"} & set(scale):
             kt = self.kt0 * scale.get("tyre_stiffness", 1.0)
             ct = self.ct0 * scale.get("tyre_damping", 1.0)
@@ -328,29 +329,12 @@ class HalfCarSpectrum:
         for name, basis in zip(self.names[self.shape_slice], self.shape_basis, strict=True):
             if name in want:
                 road[name] = self._outer_sum(g, g, weight * basis)
-        if self.corner_terms:
-            # ∂g = Q (∂T ⊙ C_c - ∂Z ⊙ x_c); ∂Z, ∂T are diagonal, so only corner k's entry. With
-            # Z = z_s W / (z_s + W), T = z_s z_t / (z_s + W), W = z_t - ω² m_t:
-            # ∂Z = (W/d)² ∂z_s + (z_s/d)² ∂W,  ∂T = z_t W/d² ∂z_s + z_s/d ∂z_t - z_s z_t/d² ∂W.
-            dZ_dzs = (wt / den) ** 2
-            dT_dzs = zt * wt / den**2
-            for q in self.corner_terms:
-                for k in range(2):
-                    name = f"ln_{q}_{CORNERS[k]}"
-                    if name not in want:
-                        continue
-                    if q in ("stiffness", "damping"):  # ∂z_s/∂ln k_s, ∂z_s/∂ln c_s
-                        dzs = ks[k] if q == "stiffness" else iw * cs[k]
-                        dZ, dT = dzs * dZ_dzs[:, k], dzs * dT_dzs[:, k]
-                    else:  # ∂z_t (= ∂W) by ln k_t, ln c_t; ∂W by ln m_t
-                        a = {"tyre_stiffness": self.kt0[k], "tyre_damping": iw * self.ct0[k]}.get(q, 0.0)
-                        factor = scale[q][k]
-                        dzt = a * factor
-                        dW = dzt if q != "unsprung_mass" else -w2 * self.mt0[k] * factor
-                        dZ = (zs[:, k] / den[:, k]) ** 2 * dW
-                        dT = zs[:, k] / den[:, k] * dzt - zs[:, k] * zt[:, k] / den[:, k] ** 2 * dW
-                    dg = [Q[:, k] * (dT * c[k] - dZ * xc[k]) for c, xc in zip(self.inputs, x, strict=True)]
-                    road[name] = self._hermitian_part(self._outer_sum(dg, g, weight))
+        corner_rows = [(q, k) for q in self.corner_terms for k in range(2) if f"ln_{q}_{CORNERS[k]}" in want]
+        if corner_rows:  # the corner values' rows, as one stack (likelihood/corners.py)
+            state = CornerState(ks, cs, kt, ct, mt, zs, zt, wt, den)
+            outer = corner_outer(state, corner_rows, w, Q, np.stack(self.inputs), np.stack(x), np.stack(g))
+            stacked = self._hermitian_part(self._fold(outer, weight))
+            road |= {f"ln_{q}_{CORNERS[k]}": m for (q, k), m in zip(corner_rows, stacked, strict=True)}
         zero = np.zeros_like(w)
         for a, name in enumerate(("sensor_front_x_m", "sensor_rear_x_m")):
             if name in self.index and name in want:  # ∂g_a/∂x_a = iω [-1/L, 1/L] x (and the rear factor)
@@ -396,7 +380,13 @@ class HalfCarSpectrum:
         if self.kernel.size == 1:
             return m
         k = self.n_freq
-        return sum(c * m[..., j: j + k, :, :] for j, c in enumerate(self.kernel))
+        # in place, through one scratch array: a fresh large temporary per tap costs more in
+        # page faults than the arithmetic
+        out = np.multiply(m[..., :k, :, :], self.kernel[0])
+        scratch = np.empty_like(out)
+        for j, c in enumerate(self.kernel[1:], start=1):
+            out += np.multiply(m[..., j: j + k, :, :], c, out=scratch)
+        return out
 
     @staticmethod
     def _diagonal(m: np.ndarray) -> np.ndarray:
@@ -408,9 +398,14 @@ class HalfCarSpectrum:
     def _outer_sum(self, a: list[np.ndarray], b: list[np.ndarray], weight: np.ndarray) -> np.ndarray:
         """Σ_c weight a_c b_cᴴ folded over the aliases: (k + 2J, 2, 2) on the extended grid."""
         out = sum(np.einsum("af,bf->fab", ac, bc.conj()) for ac, bc in zip(a, b, strict=True))
-        return (weight[:, None, None] * out).reshape(self.n_alias, self.n_ext, 2, 2).sum(axis=0)
+        return self._fold(out, weight)
+
+    def _fold(self, m: np.ndarray, weight: np.ndarray) -> np.ndarray:
+        """(..., F, 2, 2) on the aliased grid, weighted, summed over the aliases: (..., k + 2J, 2, 2)."""
+        out = m * weight[:, None, None]
+        return out.reshape(*m.shape[:-3], self.n_alias, self.n_ext, 2, 2).sum(axis=-4)
 
     @staticmethod
     def _hermitian_part(m: np.ndarray) -> np.ndarray:
-        """m + mᴴ per frequency."""
-        return m + m.conj().transpose(0, 2, 1)
+        """m + mᴴ per frequency (and row)."""
+        return m + m.conj().swapaxes(-1, -2)

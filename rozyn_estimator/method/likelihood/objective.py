@@ -42,13 +42,15 @@ def inv2(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return inv, det
 
 
-def _fisher(S: np.ndarray, dS: np.ndarray) -> np.ndarray:
-    """The Fisher information ``Σ_k tr(S⁻¹ ∂_i S S⁻¹ ∂_j S)`` of positive definite ``S``.
+def whitened(S: np.ndarray, dS: np.ndarray) -> np.ndarray:
+    """(p, 4k) real rows ``R_i`` with ``R_i · R_j = Σ_k tr(S⁻¹ ∂_i S S⁻¹ ∂_j S)``, for
+    positive definite ``S`` (k, 2, 2) and Hermitian ``dS`` (p, k, 2, 2).
 
     With ``S = L Lᴴ`` (Cholesky) the trace is ``tr(W_i W_j)``, ``W = L⁻¹ ∂S L⁻ᴴ``
     Hermitian: the real inner product of each ``W``'s four real numbers (diagonal, and
     the off-diagonal's real and imaginary parts weighted √2), a quarter of the work of
-    the complex products. It is the fit's most frequent large product.
+    the complex products. The Fisher information is ``R Rᵀ``: the fit's most frequent
+    large product.
     """
     l11 = np.sqrt(S[:, 0, 0].real)
     l21 = S[:, 1, 0] / l11
@@ -60,8 +62,7 @@ def _fisher(S: np.ndarray, dS: np.ndarray) -> np.ndarray:
     w22 = (d - 2.0 * (np.conj(l21) * b).real / l11 + np.abs(l21) ** 2 * a / l11**2) / l22**2
     p = dS.shape[0]
     root2 = math.sqrt(2.0)
-    R = np.concatenate([w11, w22, root2 * w21.real, root2 * w21.imag], axis=1).reshape(p, -1)
-    return R @ R.T
+    return np.concatenate([w11, w22, root2 * w21.real, root2 * w21.imag], axis=1).reshape(p, -1)
 
 
 def _v(inv: np.ndarray, dS: np.ndarray) -> np.ndarray:
@@ -187,7 +188,8 @@ class WhittleObjective:
             if self._parts is None or self._model is None:
                 self._fisher = np.eye(self.model.n_params)
             else:
-                fisher = _fisher(self._model[0], self._parts[1])
+                rows = whitened(self._model[0], self._parts[1])
+                fisher = rows @ rows.T
                 if self.prior is not None:
                     fisher = fisher + np.diag(self.prior.precision)
                 self._fisher = fisher

@@ -30,7 +30,7 @@ import numpy as np
 
 from rozyn_estimator.method.likelihood.covariance import inverse_information, kept
 from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
-from rozyn_estimator.method.likelihood.objective import WhittleObjective, inv2
+from rozyn_estimator.method.likelihood.objective import WhittleObjective, whitened
 from rozyn_estimator.tolerances import RELATIVE_FIELDS
 from rozyn_estimator.vehicle import Vehicle
 
@@ -58,9 +58,8 @@ def sensitivities(
     coarse = _coarse(model)
     S, dS = coarse.spectrum(theta)
     S, dS = objective.restrict(S), objective.restrict(dS)
-    inv = inv2(S)[0]
-    V = inv[None] @ dS  # S⁻¹ ∂_θS
-    info = GRID_STEP * np.einsum("pkab,qkba->pq", V, V).real
+    rows = whitened(S, dS)
+    info = GRID_STEP * rows @ rows.T
     if objective.prior is not None:
         info += np.diag(objective.prior.precision)
     keep = kept(objective, model, theta, info)
@@ -70,7 +69,7 @@ def sensitivities(
     out = {}
     for key in keys:
         dS_beta = objective.restrict(_model_derivative(coarse, theta, key))
-        cross = GRID_STEP * np.einsum("pkab,kba->p", V[keep], inv @ dS_beta).real
+        cross = GRID_STEP * rows[keep] @ whitened(S, dS_beta[None])[0]  # Σ_k tr(S⁻¹ ∂_θS S⁻¹ ∂_βS)
         out[key] = -jac @ (solve @ cross)
         if key == "wheelbase_m":
             out[key][2] += p  # lf = (lf/L) L: θ holds the share

@@ -1,0 +1,73 @@
+"""The corner values' derivative rows of the half car's spectrum, all rows at once.
+
+A corner is the suspension ``z_s = k_s + iω c_s`` on the wheel ``m_t`` on the tyre
+``z_t = k_t + iω c_t``; condensed, it acts on the body with ``Z = z_s W / d`` and passes
+the road with ``T = z_s z_t / d`` (``W = z_t - ω² m_t``, ``d = z_s + W``; see ``model``).
+A log scale factor on one of its five values moves ``z_s``, ``z_t`` or ``W`` and so
+
+    ∂Z = (W/d)² ∂z_s + (z_s/d)² ∂W,   ∂T = z_t W/d² ∂z_s + z_s/d ∂z_t - z_s z_t/d² ∂W,
+
+and, as ``∂Z``, ``∂T`` touch only their corner's entry, ``∂g_c = Q_k (∂T C_ck - ∂Z x_ck)``
+(``Q_k`` column k of ``iω P H``).
+The rows are computed as one stack (the self-calibration asks for ten of them at every
+update: a loop per row cost several times more).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+CORNERS = ("front", "rear")
+
+
+@dataclass(frozen=True)
+class CornerState:
+    """One evaluation's corners on the aliased grid: values (2,) per corner, impedances (F, 2)."""
+
+    ks: np.ndarray  # suspension stiffness [N/m]
+    cs: np.ndarray  # suspension damping [N s/m]
+    kt: np.ndarray  # tyre stiffness [N/m]
+    ct: np.ndarray  # tyre damping [N s/m]
+    mt: np.ndarray  # unsprung mass [kg]
+    zs: np.ndarray  # suspension impedance
+    zt: np.ndarray  # tyre impedance
+    wt: np.ndarray  # tyre impedance minus the wheel's inertia
+    den: np.ndarray  # zs + wt
+
+
+def corner_outer(
+    state: CornerState, rows: list[tuple[str, int]], omega: np.ndarray, Q: np.ndarray,
+    inputs: np.ndarray, x: np.ndarray, g: np.ndarray,
+) -> np.ndarray:
+    """``Σ_c ∂g_c g_cᴴ`` for each (term, corner index) row: (R, F, 2, 2).
+
+    Args:
+        state: the corners at θ.
+        rows: the scaled value (``stiffness``, ``damping``, ``tyre_stiffness``,
+            ``tyre_damping``, ``unsprung_mass``) and its corner (0 front, 1 rear).
+        omega: (F,) angular frequencies [rad/s].
+        Q: (2, 2, F) ``iω P H``.
+        inputs: (C, 2, F) the road input columns ``C_c``.
+        x: (C, 2, F) the axle responses ``x_c``.
+        g: (C, 2, F) the sensors' responses ``g_c``.
+    """
+    iw = 1j * omega
+    zs, zt, wt, den = state.zs, state.zt, state.wt, state.den
+    by_zs = ((wt / den) ** 2, zt * wt / den**2)  # (∂Z, ∂T) per unit ∂z_s, (F, 2)
+    by_zt, by_w = zs / den, ((zs / den) ** 2, zs * zt / den**2)  # ∂T per ∂z_t; (∂Z, -∂T) per ∂W
+    dZ = np.empty((len(rows), omega.size), dtype=complex)
+    dT = np.empty_like(dZ)
+    for r, (term, c) in enumerate(rows):  # a few vector operations per row
+        if term in ("stiffness", "damping"):
+            dzs = state.ks[c] if term == "stiffness" else iw * state.cs[c]
+            dZ[r], dT[r] = dzs * by_zs[0][:, c], dzs * by_zs[1][:, c]
+        else:
+            dzt = {"tyre_stiffness": state.kt[c], "tyre_damping": iw * state.ct[c]}.get(term, 0.0)
+            dW = dzt if term != "unsprung_mass" else -omega**2 * state.mt[c]
+            dZ[r], dT[r] = by_w[0][:, c] * dW, by_zt[:, c] * dzt - by_w[1][:, c] * dW
+    k = [c for _, c in rows]
+    drive = dT[:, None] * inputs[:, k].swapaxes(0, 1) - dZ[:, None] * x[:, k].swapaxes(0, 1)  # (R, C, F)
+    h = np.einsum("rcf,cbf->rbf", drive, g.conj())  # Σ_c drive_c g_cᴴ, (R, 2, F)
+    return (Q[:, k].transpose(1, 0, 2)[:, :, None, :] * h[:, None]).transpose(0, 3, 1, 2)
