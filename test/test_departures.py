@@ -11,9 +11,11 @@ from scipy.signal import freqz_sos
 from scipy.stats import skew
 
 from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.online import EstimatorConfig
 from rozyn_estimator.parameters import build, flatten
-from rozyn_estimator.tools import compare, trial_command
+from rozyn_estimator.tools import compare, demo, trial_command
 from rozyn_estimator.tools.trial import TrialSpec
+from rozyn_estimator.vehicle import Vehicle
 from sim_node.departures import Departures, SuspensionLaw
 from sim_node.fixed_point import solve_fixed_point
 from sim_node.halfcar import HalfCarPlant, static_state
@@ -291,3 +293,18 @@ def test_trial_and_compare_options_build_the_spec():
     assert plain.departures == Departures() and plain.estimator_vehicle is plain.vehicle
     lines = trial_command.mismatch_lines(spec)
     assert "rear sensor +5 ms late" in lines[0] and "tyre stiffness +10 %" in lines[1]
+
+
+def test_the_demo_runs_a_departing_vehicle_and_tells_the_estimator_wrong_values():
+    """``rozyn demo``'s departure options reach the simulator, its error options the estimator."""
+    p = argparse.ArgumentParser()
+    demo.add_arguments(p)
+    args = p.parse_args(["--damper-ratio", "2", "--time-offset-s", "0.005", "--tyre-stiffness-error", "0.1"])
+    estimator, sim = demo.node_values(args)
+    sim_cfg = build(SimConfig(), {k: v for k, v in sim.items() if k.startswith("departures.")})
+    assert sim_cfg.departures == Departures(damper_ratio=2.0, time_offset_s=0.005)
+    told = EstimatorConfig.from_parameters(estimator).vehicle
+    assert told.tyre_stiffness_front_npm == pytest.approx(1.1 * Vehicle().tyre_stiffness_front_npm)
+    assert told.suspension_stiffness_front_npm == Vehicle().suspension_stiffness_front_npm
+    with pytest.raises(ConfigError, match="damper_ratio"):
+        demo.node_values(p.parse_args(["--damper-ratio", "-1"]))

@@ -193,6 +193,13 @@ def test_outputs_csv_and_bag(faulty_bag, tmp_path):
     row = next(r for r in rows if r["published"] == "1")
     est = published[0].update.estimate
     assert float(row["mass_kg"]) == est.params[0] and float(row["cov_iyy_lf"]) == est.covariance[1, 2]
+    # the budget: the std's statistical and systematic parts (4 digits), its largest contributors
+    for name in ("mass_kg", "pitch_inertia_kgm2", "cog_from_front_axle_m"):
+        parts = np.hypot(float(row[f"{name}_std_statistical"]), float(row[f"{name}_std_systematic"]))
+        assert parts == pytest.approx(float(row[f"{name}_std"]), rel=1e-3)
+        assert "statistics" in row[f"{name}_budget"] and "stiffness" in row[f"{name}_budget"]
+    assert row["glitches_front"] == row["glitches_rear"] == "0"
+    assert row["model_fit_p"] == ""  # Rozyn's stage alone: no likelihood, no model-fit check
 
 
 def test_other_containers_types_and_fields_give_the_same_updates(tmp_path, store):

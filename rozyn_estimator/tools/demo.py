@@ -37,6 +37,12 @@ from pathlib import Path
 from typing import Any
 
 from rozyn_estimator.errors import BagError
+from rozyn_estimator.tools.options import (
+    add_departure_options,
+    add_vehicle_error_options,
+    departure_values,
+    vehicle_error_values,
+)
 
 NS = 1_000_000_000
 # Subscription queues of the estimator and the recorder: at 20 x real time the sim sends
@@ -129,6 +135,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--plot", action=argparse.BooleanOptionalAction, default=None,
         help="draw estimates.png (default: when matplotlib is installed)",
     )
+    add_departure_options(p)
+    add_vehicle_error_options(p)
 
 
 def _row(label: str, value: float, std: float, truth: float, digits: int) -> str:
@@ -141,12 +149,19 @@ def node_values(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, Any
     by the nodes' own rules (ConfigError names a bad one) before anything starts."""
     from rozyn_estimator.online import EstimatorConfig
     from rozyn_estimator.parameters import build
+    from rozyn_estimator.tools.trial import VEHICLE_ERRORS
+    from rozyn_estimator.vehicle import Vehicle
     from sim_node.node import NODE_DEFAULTS, SimNodeOptions
 
     estimator = {"speed_topic": "sim/speed", "window_s": args.window_s, "qos_depth": QUEUE_DEPTH}
+    told = Vehicle()  # the simulated vehicle; the estimator is told it with the *_error options applied
+    for key, error in vehicle_error_values(args).items():
+        estimator |= {f"vehicle.{name}": getattr(told, name) * (1.0 + error)
+                      for name in VEHICLE_ERRORS[key] if error != 0.0}
     sim = {"time_mode": "sim", "real_time_factor": args.real_time_factor, "duration_s": args.duration_s,
            "wait_for_subscribers": True, "road.kind": args.road, "road.amplitudes": args.amplitudes,
            "speed_kmh": args.speed_kmh, "seed": args.seed, "noise_std_mps2": args.noise_std_mps2}
+    sim |= {f"departures.{name}": value for name, value in departure_values(args).items()}
     EstimatorConfig.from_parameters(estimator)
     build(SimNodeOptions(), sim)
     build(NODE_DEFAULTS, sim)

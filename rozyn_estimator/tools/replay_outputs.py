@@ -5,8 +5,9 @@ bag says the truth and the node's estimates were); :class:`ReplayOutputs` writes
 the updates come,
 
 - ``updates.csv``: one row per scheduled update (:data:`CSV_COLUMNS`: stamp, status,
-  estimates, std, covariance, modes, window fill, speed, pipeline time), numbers at
-  full precision;
+  estimates, std, covariance, modes, window fill, speed, pipeline time, the std's
+  statistical and systematic parts with the largest contributors, the model-fit check,
+  glitches gated), numbers at full precision;
 - ``estimates/``: a rosbag2 MCAP bag with ``/inertia``, ``/inertia/covariance`` and
   ``/diagnostics`` as the node would have published them (serialised by rclpy, no
   DDS), logged at the bag time of the message that made each update due.
@@ -25,7 +26,7 @@ import numpy as np
 
 from rozyn_estimator.bag import BagReader, BagWriter
 from rozyn_estimator.errors import BagError
-from rozyn_estimator.method import Estimate
+from rozyn_estimator.method import PARAM_NAMES, Estimate
 from rozyn_estimator.online import (
     CUSTOM_DATA_KEY,
     LEVEL_NAMES,
@@ -34,8 +35,11 @@ from rozyn_estimator.online import (
     Health,
     OnlineEstimator,
     Update,
+    update_values,
 )
 
+BUDGET_COLUMNS = tuple(f"{name}_{part}" for name in PARAM_NAMES
+                       for part in ("std_statistical", "std_systematic", "budget"))
 TRUTH_TOPIC = "/sim/ground_truth"
 PUBLISHED_TOPIC = "/inertia"
 PARAM_SHORT = ("m", "iyy", "lf")
@@ -188,6 +192,13 @@ CSV_COLUMNS = (
     "sample_rate_hz",
     "speed_mps",
     "pipeline_ms",
+    # the published std's parts and largest contributors (issue 10), the model-fit check
+    # and the glitches gated: as /diagnostics says them (online.records.update_values)
+    *BUDGET_COLUMNS,
+    "model_fit_p",
+    "model_fit",
+    "glitches_front",
+    "glitches_rear",
 )
 
 
@@ -227,7 +238,15 @@ def csv_row(replayed: ReplayedUpdate) -> list[Any]:
         _num(u.fs_hz),
         _num(u.speed_mps if u.speed_mps is not None else ""),
         _num(est.elapsed_ms if est is not None else ""),
+        *_described(u, published is not None),
     ]
+
+
+def _described(u: Update, published: bool) -> list[str]:
+    """The budget (of a published estimate), model-fit and glitch cells, as the diagnostics'."""
+    values = update_values(u)
+    budget = [values.get(c, "") if published else "" for c in BUDGET_COLUMNS]
+    return [*budget, *(values.get(c, "") for c in CSV_COLUMNS[-4:])]
 
 
 def _num(x: Any) -> Any:

@@ -1,5 +1,5 @@
-"""The assumed corner values and sensor positions calibrated by one Newton step of the
-augmented posterior.
+"""The assumed corner values, sensor positions, gain and delay calibrated by Newton steps of
+the augmented posterior.
 
 The fit itself (:mod:`rozyn_estimator.method.likelihood.fit`) holds the vehicle file's
 suspension, tyres, unsprung masses and sensor positions fixed. On a real vehicle each is
@@ -8,9 +8,12 @@ one). Adding them all to θ as nuisances with their tolerances as Gaussian prior
 posterior that carries both: how much the data still say about (m, I, lf) once every
 assumed value may be off by its tolerance, and how much of that tolerance the data take
 back. Fitting ~10 more parameters at every iteration would double an update's time; one
-Newton step from the fit's optimum — the parameters' prior means there, the new ones at
-zero — is the one-step estimator of the augmented posterior, asymptotically the same as
-its optimum, for the price of one evaluation with the added derivatives.
+scoring step from the fit's optimum — the parameters' prior means there, the new ones at
+zero — reaches the augmented posterior's mode when the vehicle is near what its file says
+(the one-step estimator, for the price of one evaluation with the added derivatives).
+When a value is far off the step leaves the linear range (a sensor 5 ms late moves the
+delay by a hundred posterior std, and the nuisances that had absorbed it, a noise floor
+held at its boundary among them, must move back): then the fit's optimiser finds the mode.
 
 Why not the sensitivities alone (``self_calibrate: false``): when the data carry
 information on an assumed value the augmented posterior uses it (its covariance is never
@@ -27,6 +30,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import minimize
 
 from rozyn_estimator.method.likelihood.calibration import CALIBRATED
 from rozyn_estimator.method.likelihood.calibration import POSITION_KEYS as POSITIONS
@@ -37,8 +41,8 @@ from rozyn_estimator.vehicle import Vehicle
 
 _FIXED = 1e-4  # prior std of a value without a tolerance among calibrated ones (share or m)
 _HALVINGS = 4  # backtracking of the step when it does not lower the posterior's ℓ
-_MAX_STEPS = 4  # Newton steps at most
-_FAR = 3.0  # a step longer than this many posterior std: not yet in the linear range, another step
+_FAR = 3.0  # a first step longer than this many posterior std: beyond the linear range
+_CONVERGED = 0.01  # Newton decrement at which the optimiser has found the mode (to 0.1 std)
 
 
 @dataclass(frozen=True)
@@ -48,8 +52,9 @@ class Augmented:
     objective: WhittleObjective
     model: HalfCarSpectrum
     point: np.ndarray  # where the information (and so the covariance) was evaluated
-    stepped: np.ndarray  # the one-step (or few-step) estimate
+    stepped: np.ndarray  # the estimate: the posterior's mode (``point``, or one Newton step past it)
     stds: dict[str, float]  # θ name -> its prior's std (every calibrated parameter)
+    converged: bool = True  # False: the optimiser stopped at its iteration limit
 
 
 @dataclass(frozen=True)
@@ -77,10 +82,10 @@ def plan(vehicle: Vehicle, model: HalfCarSpectrum) -> Plan:
 
 
 def calibrate(objective: WhittleObjective, model: HalfCarSpectrum, theta: np.ndarray, vehicle: Vehicle,
-              todo: Plan) -> Augmented:
-    """Newton steps of the posterior with ``todo``'s parameters added, from the fit's optimum:
-    one, and more only while a step moves a parameter by more than ``_FAR`` posterior std
-    (a departure far beyond the linear range, e.g. a sensor 5 ms late)."""
+              todo: Plan, max_iter: int = 100) -> Augmented:
+    """The mode of the posterior with ``todo``'s parameters added, from the fit's optimum: one
+    scoring step when no parameter moves by more than ``_FAR`` posterior std (the linear
+    range), else the optimiser (at most ``max_iter`` iterations)."""
     aug = model.variant(corner_terms=model.corner_terms + todo.corner, sensor_positions=todo.positions,
                         calibrate_gain=todo.gain, calibrate_time_offset=todo.delay)
     start = np.zeros(aug.n_params)
@@ -100,19 +105,29 @@ def calibrate(objective: WhittleObjective, model: HalfCarSpectrum, theta: np.nda
     dS[[aug.index[name] for name in model.names]] = dS_fit
     dS[[aug.index[name] for name in new]] = dS_new
     augmented.seed(start, S, dS)
-    point = stepped = start
-    for _ in range(_MAX_STEPS):
-        point = stepped
-        value, grad = augmented.evaluate(point)
-        info = augmented.fisher(point)
-        keep = kept(augmented, aug, point, info)
-        inv = inverse_information(info[np.ix_(keep, keep)])
-        step = np.zeros_like(point)
-        step[keep] = -inv @ grad[keep]
-        stepped = _backtracked(augmented, point, step, value)
-        if np.all(np.abs(step[keep]) <= _FAR * np.sqrt(np.diag(inv))):
-            break
-    return Augmented(augmented, aug, point, stepped, stds)
+    value, grad = augmented.evaluate(start)
+    step, std = _newton_step(augmented, aug, start, grad)
+    if np.all(np.abs(step) <= _FAR * std):  # the vehicle is near its file: one step reaches the mode
+        return Augmented(augmented, aug, start, start + step, stds)
+    # Far off (a sensor 5 ms late): the nuisances that absorbed the departure move back, a
+    # noise floor from its boundary among them; the fit's trust-region optimiser finds the mode.
+    found = minimize(augmented.fun, _backtracked(augmented, start, step, value), jac=augmented.jac,
+                     hess=augmented.hess, method="trust-exact", options={"gtol": 1e-12, "maxiter": max_iter})
+    converged = bool(found.success) or augmented.decrement(found.x) < _CONVERGED
+    return Augmented(augmented, aug, found.x, found.x, stds, converged=converged)
+
+
+def _newton_step(
+    objective: WhittleObjective, model: HalfCarSpectrum, theta: np.ndarray, grad: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(the scoring step at θ, the posterior std of each parameter; inf where held: a noise
+    floor at its boundary)."""
+    info = objective.fisher(theta)
+    keep = kept(objective, model, theta, info)
+    inv = inverse_information(info[np.ix_(keep, keep)])
+    step, std = np.zeros_like(theta), np.full(theta.shape, np.inf)
+    step[keep], std[keep] = -inv @ grad[keep], np.sqrt(np.diag(inv))
+    return step, std
 
 
 def _backtracked(

@@ -206,6 +206,8 @@ def _refine(
     try:
         _check_noise(theta, objective, cfg)
         found = uncertainty(objective, model, theta, vehicle, cfg, y)
+        if not found.converged:
+            notes.append(f"likelihood calibration: not converged in {cfg.max_iter} iterations")
         _check(found.params, found.covariance, L)
         # the published model's fit; the calibrated values are held by their priors: they
         # absorb no misfit, and the check's degrees of freedom are the fit's own

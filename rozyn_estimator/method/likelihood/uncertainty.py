@@ -41,6 +41,7 @@ class Uncertainty:
     calibration: tuple[Calibration, ...]
     objective: WhittleObjective  # the (calibrated) posterior's
     theta: np.ndarray  # its parameters at the estimate
+    converged: bool = True  # False: the calibration's optimiser stopped at its iteration limit
 
 
 def uncertainty(objective: WhittleObjective, model: HalfCarSpectrum, theta: np.ndarray, vehicle: Vehicle,
@@ -49,16 +50,18 @@ def uncertainty(objective: WhittleObjective, model: HalfCarSpectrum, theta: np.n
     todo = plan(vehicle, model)
     stds: dict[str, float] = {}
     start = stepped = theta
+    converged = True
     if cfg.self_calibrate and todo.any:
-        aug = calibrate(objective, model, theta, vehicle, todo)
+        aug = calibrate(objective, model, theta, vehicle, todo, cfg.max_iter)
         objective, model, start, stepped, stds = aug.objective, aug.model, aug.point, aug.stepped, aug.stds
+        converged = aug.converged
     cov, factors, parts = sandwich_covariance(objective, model, start, cfg, accel)
     contributions = {(CALIBRATED.get(name) or POSITION_KEYS[name]): c for name, c in parts.items()}
     assumed = _assumed(vehicle, cfg, set(contributions))
     sens = sensitivities(objective, model, start, list(assumed))
     contributions |= {key: sens[key] * u for key, u in assumed.items()}
     return Uncertainty(model.physical(stepped), cov, factors, contributions,
-                       calibration(objective, model, start, stepped, stds), objective, stepped)
+                       calibration(objective, model, start, stepped, stds), objective, stepped, converged)
 
 
 def _assumed(vehicle: Vehicle, cfg: LikelihoodConfig, calibrated: set[str]) -> dict[str, float]:
