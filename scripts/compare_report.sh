@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Regenerate the evidence of the likelihood refinement (docs/compare/*.md) with
 # `rozyn compare`, 100 seeds per case, then docs/RESULTS.md (which includes them).
-# About 25 minutes on 2 cores.
+# About 30 minutes on 2 cores.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$root/scripts/bootstrap.sh"
@@ -20,6 +20,7 @@ run issue6 --suite issue6
 run acceptance-table5-1 --suite acceptance --methods rozyn,likelihood
 run acceptance-second-vehicle --suite acceptance --vehicle-preset second --methods rozyn,likelihood
 run robustness --suite robustness --methods rozyn,likelihood
+run mismatch --suite mismatch --methods likelihood,rozyn
 suspension="--noise 0.1 --methods likelihood,likelihood-nuisance"
 # shellcheck disable=SC2086
 {

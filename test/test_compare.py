@@ -106,3 +106,24 @@ def test_known_stiffness_error_and_the_nuisance_fit():
     assert fixed.bias_pct[0] > 3.0
     assert np.all(np.abs(free.bias_pct) < 1.0) and free.failures == 0
     assert np.all(free.std <= np.array([10.0, 25.0, 0.01]))
+
+
+# Issue 10's acceptance: the mismatch suite's cases on held-out seeds (docs/RESULTS.md reports
+# seeds 1-100). Coverage from 100 seeds is a binomial count: as above, a bar of 88 % per
+# parameter (a calibrated interval falls below it with under 0.3 % chance).
+MISMATCH = suite("mismatch", TrialSpec())
+WARNS = {"dampers 2x": 0.80, "rear accelerometer 5 ms": 0.80}  # the model check must warn
+IN_MODEL = "the model itself"  # ... and must not
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("index", range(len(MISMATCH)), ids=[c.label[:40] for c in MISMATCH])
+def test_mismatch(index):
+    case = MISMATCH[index]
+    s = summarise(compare(case.spec, ["likelihood"], SEEDS, jobs=2)["likelihood"])
+    assert bar_failures(s, dataclasses.replace(case.bars, coverage=(0.88, 1.0))) == [], case.label
+    warns = [share for start, share in WARNS.items() if case.label.startswith(start)]
+    if warns:
+        assert s.model_warn_share >= warns[0], (case.label, s.model_warn_share)
+    if case.label.startswith(IN_MODEL):
+        assert s.model_warn_share <= 0.05, (case.label, s.model_warn_share)

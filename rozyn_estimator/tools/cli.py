@@ -43,7 +43,7 @@ COMMANDS = (
     Command("trial", "simulate seeded runs and estimate from each", "trial_command"),
     Command("demo", "the main job: sim and estimator nodes on sim time, estimate vs truth", "demo"),
     Command("bench", "time the simulator and the pipeline (JSON)", "bench"),
-    Command("replay", "replay a bag through the online estimator offline: CSV of updates + output bag",
+    Command("replay", "replay bags through the online estimator offline: CSV of updates + output bag",
             "replay"),
     Command("study", "Monte-Carlo grid of the thesis: speed x measurement time x road, tables and plots",
             "study"),

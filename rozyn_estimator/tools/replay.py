@@ -34,7 +34,7 @@ from rozyn_estimator.tools.replay_report import format_summary
 
 __all__ = ["DESCRIPTION", "HELP", "add_arguments", "replay", "run"]
 
-HELP = "replay a bag through the online estimator offline: CSV of updates + output bag"  # as cli.py lists it
+HELP = "replay bags through the online estimator offline: CSV of updates + output bag"  # as cli.py lists it
 DESCRIPTION = (
     "Feed the accelerometer messages of a bag (rosbag2 MCAP or SQLite3, or ROS 1) through the "
     "estimator node's own online code, in the order the bag received them, and write updates.csv "

@@ -106,8 +106,8 @@ def calibrate(objective: WhittleObjective, model: HalfCarSpectrum, theta: np.nda
     dS[[aug.index[name] for name in new]] = dS_new
     augmented.seed(start, S, dS)
     value, grad = augmented.evaluate(start)
-    step, std = _newton_step(augmented, aug, start, grad)
-    if np.all(np.abs(step) <= _FAR * std):  # the vehicle is near its file: one step reaches the mode
+    step, posterior_std = _newton_step(augmented, aug, start, grad)
+    if np.all(np.abs(step) <= _FAR * posterior_std):  # near its file: one step reaches the mode
         return Augmented(augmented, aug, start, start + step, stds)
     # Far off (a sensor 5 ms late): the nuisances that absorbed the departure move back, a
     # noise floor from its boundary among them; the fit's trust-region optimiser finds the mode.
