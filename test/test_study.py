@@ -25,7 +25,8 @@ ROOT = Path(__file__).resolve().parents[1]
 GRID = ["--roads", "iso,laplace", "--speeds-kmh", "50,100", "--durations-s", "20:40:20", "--trials", "4"]
 N_TRIALS = 2 * 2 * 2 * 4
 FIGURES = ("std_iso", "std_laplace", "std_lines_iso", "std_lines_laplace", "bias_iso", "bias_laplace",
-           "std_ratio_laplace_iso", "hist_100kmh_40s", "box_100kmh_40s", "acf_100kmh_40s")
+           "precision_iso", "precision_laplace", "std_ratio_laplace_iso", "hist_100kmh_40s", "box_100kmh_40s",
+           "acf_100kmh_40s")
 
 
 def _study(out: Path, *extra: str) -> int:
@@ -66,8 +67,12 @@ def test_outputs_exist_and_summary_matches_trials(reference):
                                                                     rel=1e-9, abs=1e-9)
             q1, q3 = np.percentile(p[:, i], [25, 75])
             assert float(cell[f"{name}_robust_std"]) == pytest.approx((q3 - q1) / 1.349, rel=1e-12)
+    assert all(r[f"{name}_std"] == r[f"{name}_std_statistical"] == "" for r in trials for name in PARAM_NAMES)
     md = (reference / "summary.md").read_text()
-    assert md.count("\n| iso |") == 4 and md.count("\n| laplace |") == 4 and "std m [kg]" in md
+    # a table per parameter (4 cells per road each), then the shortest drive (2 speeds per road)
+    assert md.count("\n| iso |") == 3 * 4 + 2 and md.count("\n| laplace |") == 3 * 4 + 2
+    assert "| mean [kg] | std [kg] | bias [%] |\n" in md and "coverage" not in md.split("## mass")[1]
+    assert "## Shortest drive for 1 % (2σ)" in md
     for name in FIGURES:
         png = reference / "figures" / f"{name}.png"
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name

@@ -7,7 +7,9 @@ Modules, by concern (each imports its siblings directly, never this package):
 - :mod:`~rozyn_estimator.tools.study.results`: trial rows and ``results.csv``;
 - :mod:`~rozyn_estimator.tools.study.directory`: the output directory and ``study.json``;
 - :mod:`~rozyn_estimator.tools.study.work`: chunks of trials on local processes or Dask;
-- :mod:`~rozyn_estimator.tools.study.summary`: per-cell statistics and the summary tables;
+- :mod:`~rozyn_estimator.tools.study.summary`: per-cell statistics (spread, bias, the
+  published std's coverage) and their tables;
+- :mod:`~rozyn_estimator.tools.study.precision`: the shortest drive for 1 % (2σ);
 - :mod:`~rozyn_estimator.tools.study.correlations`: the correlation figures' data;
 - :mod:`~rozyn_estimator.tools.study.outputs`: tables and figures from the results;
 - :mod:`~rozyn_estimator.tools.study.plots`: the figures (matplotlib; not imported here);
@@ -17,6 +19,7 @@ Modules, by concern (each imports its siblings directly, never this package):
 
 from rozyn_estimator.tools.study.command import DESCRIPTION, HELP, add_arguments, run
 from rozyn_estimator.tools.study.directory import load_manifest
+from rozyn_estimator.tools.study.precision import ShortestDrive, shortest_drives
 from rozyn_estimator.tools.study.results import TrialRow, read_results
 from rozyn_estimator.tools.study.settings import (
     FIGURES,
@@ -41,6 +44,7 @@ __all__ = [
     "SUMMARY_MD",
     "Cell",
     "CellSummary",
+    "ShortestDrive",
     "StudySettings",
     "TrialRow",
     "add_arguments",
@@ -51,5 +55,6 @@ __all__ = [
     "read_results",
     "run",
     "run_chunk",
+    "shortest_drives",
     "summarise_cells",
 ]

@@ -32,7 +32,7 @@ from typing import Any
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS
 from rozyn_estimator.tools.study.directory import check_same_study, load_manifest, prepare_dir, write_manifest
-from rozyn_estimator.tools.study.outputs import write_outputs
+from rozyn_estimator.tools.study.outputs import write_outputs, write_tables
 from rozyn_estimator.tools.study.results import TrialRow, read_results
 from rozyn_estimator.tools.study.settings import (
     FIGURES,
@@ -45,7 +45,6 @@ from rozyn_estimator.tools.study.settings import (
     parse_grid,
     parse_roads,
 )
-from rozyn_estimator.tools.study.summary import study_title, summarise_cells, write_summary
 from rozyn_estimator.tools.study.work import (
     DEFAULT_CHUNK_TRIALS,
     RunOptions,
@@ -161,8 +160,7 @@ def run(args: argparse.Namespace) -> int:
               f"tables and figures cover those", file=sys.stderr)
     started = time.perf_counter()
     if args.no_plots:
-        summaries = summarise_cells(settings, rows)
-        write_summary(summaries, out_dir / SUMMARY_CSV, out_dir / SUMMARY_MD, study_title(settings))
+        write_tables(out_dir, settings, rows)
     else:
         if not args.quiet:
             print("rozyn study: writing tables and figures", file=sys.stderr)

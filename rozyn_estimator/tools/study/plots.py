@@ -7,6 +7,9 @@ The thesis' chapter 5 figures, from a study's summaries and trials:
 - ``std_lines_<road>.png``: the same std against time (one line per speed) and against
   speed (one line per time): velocity (in)dependence and the growth at short times;
 - ``bias_<road>.png``: bias of the mean estimate vs truth [%];
+- ``precision_<road>.png``: the std as a share of the truth against time (a line per
+  speed; the shortest drive for 1 % marked) and, when the method publishes a std, its
+  95 % coverage, published and statistical;
 - ``std_ratio_laplace_iso.png``: std on the Laplace road over std on the ISO road;
 - ``hist_<cell>.png``, ``box_<cell>.png``: estimates and errors of one cell
   (Figs 5-7 to 5-10, 5-16 to 5-19);
@@ -30,6 +33,7 @@ from matplotlib.figure import Figure
 
 from rozyn_estimator.method import PARAM_NAMES
 from rozyn_estimator.tools.study.correlations import CellCorrelations
+from rozyn_estimator.tools.study.precision import TARGET_PCT, TARGET_SIGMAS, shortest_drives
 from rozyn_estimator.tools.study.results import TrialRow
 from rozyn_estimator.tools.study.settings import Cell, StudySettings
 from rozyn_estimator.tools.study.summary import CellSummary
@@ -68,7 +72,8 @@ def plot_study(
     for road in settings.roads:
         tasks += [(f"std_{road}", std_heatmaps, (settings, summaries, road)),
                   (f"std_lines_{road}", std_lines, (settings, summaries, road)),
-                  (f"bias_{road}", bias_heatmaps, (settings, summaries, road))]
+                  (f"bias_{road}", bias_heatmaps, (settings, summaries, road)),
+                  (f"precision_{road}", precision_lines, (settings, summaries, road))]
     if {"iso", "laplace"} <= set(settings.roads):
         tasks.append(("std_ratio_laplace_iso", std_ratio_heatmaps, (settings, summaries)))
     if correlations:
@@ -211,6 +216,64 @@ def std_lines(settings: StudySettings, summaries: Sequence[CellSummary], road: s
     axes[0, 0].legend(title="speed", fontsize=7, ncols=2)
     axes[0, 1].legend(title="measurement time", fontsize=7, ncols=2)
     fig.suptitle(f"Std of the estimates over {settings.trials} roads — {road_label(settings, road)}")
+    return fig
+
+
+def precision_lines(settings: StudySettings, summaries: Sequence[CellSummary], road: str) -> Figure:
+    """Std as a share of the truth vs measurement time, a line per speed, the shortest drive
+    for 1 % starred; below, when the method publishes a std, its 95 % coverage per cell."""
+    from scipy.stats import binom
+
+    rel = grid_values(settings, summaries, road, "std") / np.abs(_truth(settings)) * 100.0
+    coverage = any(s.with_std for s in summaries if s.cell.road == road)
+    fig = Figure(figsize=(15, 8.4 if coverage else 4.6), layout="constrained")
+    axes = np.atleast_2d(fig.subplots(2 if coverage else 1, 3, sharex=True))
+    speeds, durations = settings.speeds_kmh, np.array(settings.durations_s)
+    palette = matplotlib.colormaps["viridis"](np.linspace(0, 0.9, len(speeds)))
+    drives = {d.speed_kmh: d.duration_s for d in shortest_drives(settings, summaries) if d.road == road}
+    covered = {stat: 100.0 * grid_values(settings, summaries, road, stat)
+               for stat in ("coverage_95", "coverage_95_statistical")}
+    lo, hi = (100.0 * binom.ppf(q, settings.trials, 0.95) / settings.trials for q in (0.025, 0.975))
+    floor = float(np.nanmin(np.append(np.concatenate([c.ravel() for c in covered.values()]), lo)))
+    for k, name in enumerate(PARAM_NAMES):
+        top = axes[0, k]
+        for i, (speed, color) in enumerate(zip(speeds, palette, strict=True)):
+            top.plot(durations, rel[i, :, k], "o-", ms=3, color=color, label=f"{speed:g} km/h")
+            best = drives.get(speed, (None,) * 3)[k]
+            if best is not None:
+                j = int(np.flatnonzero(durations == best)[0])
+                top.plot(best, rel[i, j, k], "*", ms=13, color=color, mec="black", mew=0.6)
+        top.axhline(TARGET_PCT / TARGET_SIGMAS, color="black", ls="--", lw=1,
+                    label=f"{TARGET_SIGMAS:g}σ = {TARGET_PCT:g} %")
+        finite = rel[:, :, k][np.isfinite(rel[:, :, k]) & (rel[:, :, k] > 0)]
+        if finite.size and finite.max() > 5 * finite.min():
+            top.set_yscale("log")
+        top.set(ylabel=f"std of {SYMBOLS[name]} [% of truth]", title=f"{NAMES[name]} {SYMBOLS[name]}: std")
+        top.grid(True, which="both", alpha=0.3)
+        if coverage:
+            bottom = axes[1, k]
+            bottom.axhspan(lo, hi, color="grey", alpha=0.15,
+                           label=f"95 % range for an honest std ({settings.trials} trials)")
+            bottom.axhline(95.0, color="black", lw=0.8)
+            for i, color in enumerate(palette):
+                bottom.plot(durations, covered["coverage_95"][i, :, k], "o-", ms=3, color=color)
+                bottom.plot(durations, covered["coverage_95_statistical"][i, :, k], "s--", ms=4, color=color,
+                            mfc="none")
+            bottom.plot([], [], "k-", label="published std")
+            bottom.plot([], [], "k--", label="statistical part")
+            bottom.set(ylabel="coverage of ±1.96 std [%]", ylim=(floor - 5.0, 102.0),
+                       title=f"{NAMES[name]} {SYMBOLS[name]}: coverage")
+            bottom.grid(True, alpha=0.3)
+    for ax in axes[-1]:
+        ax.set_xlabel("measurement time [s]")
+    axes[0, 0].plot([], [], "*", ms=10, color="grey", mec="black", mew=0.6,
+                    label=f"shortest drive for {TARGET_PCT:g} %")
+    axes[0, 0].legend(title="speed", fontsize=7, ncols=2)
+    if coverage:
+        axes[1, 0].legend(fontsize=7, loc="lower right")
+    fig.suptitle(f"Std of the estimates over {settings.trials} roads per cell as a share of the truth"
+                 + (" and the share of trials whose estimate ± 1.96 std holds the truth" if coverage else "")
+                 + f"\n{road_label(settings, road)}, method {settings.method}")
     return fig
 
 

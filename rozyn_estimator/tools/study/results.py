@@ -3,6 +3,13 @@
 The parent process appends each finished chunk to the file (:class:`ResultsWriter`), so
 an interrupted study keeps what it computed; a line cut short by the interruption is
 skipped on reading, and a finished study's file is rewritten in grid order.
+
+Each row carries the estimate and, when the method publishes one, its standard deviation
+twice: ``<param>_std``, the published one (the square root of the covariance's diagonal:
+the data's part and the tolerances' propagated together) and ``<param>_std_statistical``,
+the data's part alone (the budget's statistical covariance; the covariance itself when
+there is no budget). Files written before these columns existed (:data:`LEGACY_COLUMNS`)
+are read as rows without a std.
 """
 
 from __future__ import annotations
@@ -21,10 +28,11 @@ from rozyn_estimator.tools.study.settings import Cell, StudySettings, fmt_value
 from rozyn_estimator.tools.trial import TrialResult
 
 MODE_COLUMNS = ("mode1_freq_hz", "mode1_damping", "mode2_freq_hz", "mode2_damping")
-COLUMNS = (
-    "road", "speed_kmh", "duration_s", "trial", "seed", "status", "stage", *PARAM_NAMES, *MODE_COLUMNS,
-    "reason",
-)
+STD_COLUMNS = tuple(f"{p}_std" for p in PARAM_NAMES)  # the published std
+STATISTICAL_STD_COLUMNS = tuple(f"{p}_std_statistical" for p in PARAM_NAMES)  # the data's part
+_KEY_COLUMNS = ("road", "speed_kmh", "duration_s", "trial", "seed", "status", "stage")
+COLUMNS = (*_KEY_COLUMNS, *PARAM_NAMES, *STD_COLUMNS, *STATISTICAL_STD_COLUMNS, *MODE_COLUMNS, "reason")
+LEGACY_COLUMNS = (*_KEY_COLUMNS, *PARAM_NAMES, *MODE_COLUMNS, "reason")  # before the std columns
 
 Params = tuple[float, float, float]  # in PARAM_NAMES order
 Modes = tuple[float, float, float, float]  # f1 [Hz], zeta1, f2 [Hz], zeta2
@@ -42,6 +50,8 @@ class TrialRow:
     modes: Modes | None
     reason: str = ""
     stage: str = "rozyn"  # the estimator stage whose numbers these are
+    std: Params | None = None  # the published std (sqrt diag of the covariance); None: none published
+    std_statistical: Params | None = None  # its statistical part (the data's)
 
     @property
     def key(self) -> tuple[str, float, float, int]:
@@ -55,12 +65,8 @@ class TrialRow:
             first, second = est.modes[:2]
             modes = (float(first.freq_hz), float(first.damping_ratio),
                      float(second.freq_hz), float(second.damping_ratio))
-        params: Params | None = None
-        if est.params is not None:
-            mass, inertia, cog = est.params
-            params = (float(mass), float(inertia), float(cog))
-        return cls(cell, trial, result.seed, est.status, params, modes, est.reason,
-                   getattr(est, "stage", "rozyn"))
+        return cls(cell, trial, result.seed, est.status, _params(est.params), modes, est.reason,
+                   getattr(est, "stage", "rozyn"), _params(est.std), _params(est.statistical_std))
 
     def to_csv(self) -> list[str]:
         def num(values: Sequence[float] | None, n: int) -> list[str]:
@@ -68,25 +74,35 @@ class TrialRow:
 
         c = self.cell
         return [c.road, fmt_value(c.speed_kmh), fmt_value(c.duration_s), str(self.trial), str(self.seed),
-                self.status, self.stage, *num(self.params, 3), *num(self.modes, 4), self.reason]
+                self.status, self.stage, *num(self.params, 3), *num(self.std, 3),
+                *num(self.std_statistical, 3), *num(self.modes, 4), self.reason]
 
     @classmethod
     def from_csv(cls, record: dict[str, str]) -> TrialRow:
+        """A row from a CSV record (of :data:`COLUMNS`, or :data:`LEGACY_COLUMNS`: no std)."""
         def nums(names: Sequence[str]) -> list[float] | None:
-            text = [record[n] for n in names]
+            text = [record.get(n, "") for n in names]
             return None if any(t == "" for t in text) else [float(t) for t in text]
 
         cell = Cell(record["road"], float(record["speed_kmh"]), float(record["duration_s"]))
-        p, m = nums(PARAM_NAMES), nums(MODE_COLUMNS)
-        params = None if p is None else (p[0], p[1], p[2])
+        m = nums(MODE_COLUMNS)
         modes = None if m is None else (m[0], m[1], m[2], m[3])
-        return cls(cell, int(record["trial"]), int(record["seed"]), record["status"], params, modes,
-                   record["reason"], record["stage"])
+        return cls(cell, int(record["trial"]), int(record["seed"]), record["status"],
+                   _params(nums(PARAM_NAMES)), modes, record["reason"], record["stage"],
+                   _params(nums(STD_COLUMNS)), _params(nums(STATISTICAL_STD_COLUMNS)))
 
     def to_trial_result(self, truth: np.ndarray) -> TrialResult:
         params = None if self.params is None else np.array(self.params)
         est = Estimate(status=self.status, reason=self.reason, params=params)
         return TrialResult(seed=self.seed, estimate=est, truth=truth, sim_ms=float("nan"))
+
+
+def _params(values: Sequence[float] | np.ndarray | None) -> Params | None:
+    """Three numbers in PARAM_NAMES order as floats (None stays None)."""
+    if values is None:
+        return None
+    first, second, third = (float(v) for v in values)
+    return (first, second, third)
 
 
 def read_results(path: Path) -> list[TrialRow]:
@@ -96,7 +112,8 @@ def read_results(path: Path) -> list[TrialRow]:
 
 
 def scan_results(path: Path) -> tuple[list[TrialRow], bool]:
-    """(rows, clean): ``clean`` is False when the file ends in a partial line."""
+    """(rows, clean): ``clean`` is False when rows cannot be appended to the file as it is:
+    it ends in a partial line, holds a line that is not a row, or has the legacy header."""
     with path.open(newline="") as f:
         text = f.read()
     clean = text == "" or text.endswith("\n")
@@ -104,8 +121,10 @@ def scan_results(path: Path) -> tuple[list[TrialRow], bool]:
     if not clean:
         lines = lines[:-1]
     reader = csv.DictReader(lines)
-    if tuple(reader.fieldnames or ()) != COLUMNS:
+    header = tuple(reader.fieldnames or ())
+    if header not in (COLUMNS, LEGACY_COLUMNS):
         raise ConfigError(f"{path}: not a study results file (header {reader.fieldnames})")
+    clean = clean and header == COLUMNS
     rows = []
     for record in reader:
         try:

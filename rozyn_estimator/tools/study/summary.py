@@ -1,7 +1,10 @@
-"""Per-cell statistics of a study's trials and the summary tables (``summary.csv``/``.md``).
+"""Per-cell statistics of a study's trials and their tables (``summary.csv``, ``summary.md``'s).
 
 The statistics are those of ``rozyn trial`` (:func:`rozyn_estimator.tools.trial.summarise`)
-plus a robust spread (interquartile range / 1.349).
+plus a robust spread (interquartile range / 1.349) and, where the method publishes a
+standard deviation with each estimate, how honest it is: its rms over the trials and its
+95 % coverage (the share of the trials whose ±1.96 std interval holds the truth), for the
+published std and for its statistical part alone.
 """
 
 from __future__ import annotations
@@ -18,26 +21,41 @@ from rozyn_estimator.tools.study.results import Params, TrialRow
 from rozyn_estimator.tools.study.settings import Cell, StudySettings, fmt_value
 from rozyn_estimator.tools.trial import summarise
 
-SUMMARY_STATS = ("mean", "std", "bias_pct", "within_6pct", "robust_std")
+Z_95 = 1.96  # the two-sided 95 % quantile of the normal distribution
+SUMMARY_STATS = ("mean", "std", "bias_pct", "within_6pct", "robust_std", "reported_std", "coverage_95",
+                 "reported_std_statistical", "coverage_95_statistical")
 SUMMARY_COLUMNS = (
-    "road", "speed_kmh", "duration_s", "trials", "failures",
+    "road", "speed_kmh", "duration_s", "trials", "failures", "with_std",
     *(f"{p}_{stat}" for p in PARAM_NAMES for stat in SUMMARY_STATS),
 )
+# summary.md: symbol, unit, format of a value and of a spread, per parameter
+_MD_PARAMS = (("mass m", "kg", "{:.1f}", "{:.2f}"), ("pitch inertia I_yy", "kg m²", "{:.1f}", "{:.2f}"),
+              ("CoG position l_f", "m", "{:.4f}", "{:.4f}"))
 
 
 @dataclass(frozen=True)
 class CellSummary:
-    """Statistics of one cell's trials, per parameter in PARAM_NAMES order."""
+    """Statistics of one cell's trials, per parameter in PARAM_NAMES order.
+
+    The published-std statistics are over the successful trials that carry a std
+    (``with_std`` of them); NaN when none does (e.g. Rozyn's pipeline in a study, whose
+    per-trial covariance is off).
+    """
 
     cell: Cell
     n: int
     failures: int
     truth: np.ndarray
     mean: np.ndarray
-    std: np.ndarray  # sample std (ddof = 1) over the successful trials
+    std: np.ndarray  # sample std (ddof = 1) over the successful trials: the spread
     bias_pct: np.ndarray
     within_6pct: np.ndarray  # share of successful trials within 6 % of the truth
     robust_std: np.ndarray  # interquartile range / 1.349: the std a normal spread would have
+    with_std: int  # successful trials with a published std
+    reported_std: np.ndarray  # rms of the published std
+    coverage_95: np.ndarray  # share with |estimate - truth| <= 1.96 published std
+    reported_std_statistical: np.ndarray  # rms of its statistical part
+    coverage_95_statistical: np.ndarray  # the same with the statistical part
 
 
 def summarise_cells(settings: StudySettings, rows: Iterable[TrialRow]) -> list[CellSummary]:
@@ -55,8 +73,15 @@ def summarise_cells(settings: StudySettings, rows: Iterable[TrialRow]) -> list[C
         if cell not in by_cell:
             continue
         s = summarise(r.to_trial_result(truth) for r in by_cell[cell])
-        out.append(CellSummary(cell, s.n, s.failures, truth, s.mean, s.std, s.bias_pct, s.within_6pct,
-                               _robust_std([r.params for r in by_cell[cell] if r.status == "ok"])))
+        ok = [r for r in by_cell[cell] if r.status == "ok" and r.params is not None]
+        published = [r for r in ok if r.std is not None]
+        statistical = [r for r in ok if r.std_statistical is not None]
+        out.append(CellSummary(
+            cell, s.n, s.failures, truth, s.mean, s.std, s.bias_pct, s.within_6pct,
+            _robust_std([r.params for r in ok]), len(published),
+            *_honesty([r.params for r in published], [r.std for r in published], truth),
+            *_honesty([r.params for r in statistical], [r.std_statistical for r in statistical], truth),
+        ))
     return out
 
 
@@ -67,6 +92,16 @@ def _robust_std(params: Sequence[Params | None]) -> np.ndarray:
     return (q3 - q1) / 1.349
 
 
+def _honesty(
+    params: Sequence[Params | None], stds: Sequence[Params | None], truth: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(rms of the std, share of the trials whose ±1.96 std interval holds the truth)."""
+    if not params:
+        return np.full(3, np.nan), np.full(3, np.nan)
+    p, std = np.array(params, dtype=float), np.array(stds, dtype=float)
+    return np.sqrt(np.mean(std**2, axis=0)), np.mean(np.abs(p - truth) <= Z_95 * std, axis=0)
+
+
 def study_title(settings: StudySettings) -> str:
     """The title of ``summary.md``: the road, the method and the trials per cell."""
     noise = f", sensor noise {settings.noise_std_mps2:g} m/s²" if settings.noise_std_mps2 else ""
@@ -74,32 +109,58 @@ def study_title(settings: StudySettings) -> str:
             f"{noise}, method {settings.method}, {settings.trials} trials per cell")
 
 
-def write_summary(summaries: Sequence[CellSummary], csv_path: Path, md_path: Path, title: str) -> None:
-    """The per-cell table as CSV (full precision) and Markdown (rounded, for reading)."""
-    with csv_path.open("w", newline="") as f:
+def write_summary_csv(summaries: Sequence[CellSummary], path: Path) -> None:
+    """``summary.csv``: the per-cell statistics at full precision."""
+    with path.open("w", newline="") as f:
         out = csv.writer(f, lineterminator="\n")
         out.writerow(SUMMARY_COLUMNS)
         for s in summaries:
             stats = [getattr(s, stat)[i] for i in range(3) for stat in SUMMARY_STATS]
             out.writerow([s.cell.road, fmt_value(s.cell.speed_kmh), fmt_value(s.cell.duration_s), s.n,
-                          s.failures, *(repr(float(v)) for v in stats)])
-    md_path.write_text(summary_markdown(summaries, title))
+                          s.failures, s.with_std, *(repr(float(v)) for v in stats)])
 
 
-def summary_markdown(summaries: Sequence[CellSummary], title: str) -> str:
-    head = ("| road | speed [km/h] | time [s] | trials | failures | mean m [kg] | std m [kg] | bias m [%] "
-            "| mean I_yy [kg m²] | std I_yy [kg m²] | bias I_yy [%] | mean l_f [m] | std l_f [m] "
-            "| bias l_f [%] |")
-    lines = [f"# {title}", "", head, "|" + "---|" * (head.count("|") - 1)]
-    for s in summaries:
-        cells = [s.cell.road, fmt_value(s.cell.speed_kmh), fmt_value(s.cell.duration_s), str(s.n),
-                 str(s.failures)]
-        for i, (mean_fmt, std_fmt) in enumerate((("{:.1f}", "{:.2f}"), ("{:.1f}", "{:.2f}"),
-                                                   ("{:.4f}", "{:.4f}"))):
-            cells += [_num(mean_fmt, s.mean[i]), _num(std_fmt, s.std[i]), _num("{:+.2f}", s.bias_pct[i])]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+def summary_markdown(settings: StudySettings, summaries: Sequence[CellSummary]) -> list[str]:
+    """The lines of ``summary.md``'s title, legend and tables: one per parameter, rounded."""
+    stds = any(s.with_std for s in summaries)
+    lines = [f"# {study_title(settings)}", "", _legend(stds)]
+    for k, (name, unit, value_fmt, spread_fmt) in enumerate(_MD_PARAMS):
+        truth = summaries[0].truth[k] if summaries else float("nan")
+        head = (f"| road | speed [km/h] | time [s] | trials | failures | mean [{unit}] | std [{unit}] "
+                f"| bias [%] |")
+        if stds:
+            head += (f" with std | published std [{unit}] | coverage 95 % | statistical std [{unit}] "
+                     f"| coverage 95 % (statistical) |")
+        lines += ["", f"## {name} [{unit}], truth {truth:g}", "", head, "|" + "---|" * (head.count("|") - 1)]
+        for s in summaries:
+            cells = [s.cell.road, fmt_value(s.cell.speed_kmh), fmt_value(s.cell.duration_s), str(s.n),
+                     str(s.failures), _num(value_fmt, s.mean[k]), _num(spread_fmt, s.std[k]),
+                     _num("{:+.2f}", s.bias_pct[k])]
+            if stds:
+                cells += [str(s.with_std), _num(spread_fmt, s.reported_std[k]), _pct(s.coverage_95[k]),
+                          _num(spread_fmt, s.reported_std_statistical[k]), _pct(s.coverage_95_statistical[k])]
+            lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
+def _legend(stds: bool) -> str:
+    text = ("std: the spread of the successful trials' estimates (sample std); bias: mean / truth − 1; "
+            "failures: trials without an estimate.")
+    if stds:
+        text += (" Published std: the rms of the std published with each estimate (the data's part and "
+                 "the tolerances' together); statistical std: the data's part alone; with std: the "
+                 "successful trials that carry one. Coverage 95 %: the share of those whose estimate "
+                 "± 1.96 std holds the truth (an honest std: about 95 %; the simulated vehicle is "
+                 "the assumed one, so the tolerances' part is not realised here and the published "
+                 "coverage may exceed it).")
+    else:
+        text += " The method publishes no std with its estimates here: no coverage."
+    return text
 
 
 def _num(fmt: str, value: float) -> str:
     return "–" if not np.isfinite(value) else fmt.format(value)
+
+
+def _pct(share: float) -> str:
+    return "–" if not np.isfinite(share) else f"{100.0 * share:.0f} %"
