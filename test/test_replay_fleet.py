@@ -7,18 +7,15 @@ are ``dask`` processes on localhost.
 from __future__ import annotations
 
 import csv
-import json
-import os
 import shutil
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 from bag_helpers import check_bag
+from dask_helpers import DaskProcesses
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
@@ -102,36 +99,11 @@ def test_a_bad_option_fails_once_before_any_bag(fleet, tmp_path, capsys):
 
 
 @pytest.fixture
-def dask_cluster(tmp_path):
+def dask_cluster(tmp_path, request):
     """A ``dask scheduler`` and one ``dask worker``, processes on localhost."""
-    if not (BIN / "dask").exists():
-        pytest.skip("dask is not installed")
-    file = tmp_path / "scheduler.json"
-    common = {"env": dict(os.environ, PYTHONUNBUFFERED="1"), "stdout": subprocess.DEVNULL,
-              "stderr": subprocess.PIPE, "text": True, "start_new_session": True}
-    procs = [subprocess.Popen([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port", "0",
-                               "--no-dashboard", "--scheduler-file", str(file)], **common)]
-    try:
-        deadline = time.monotonic() + 60
-        while not file.exists() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        address = json.loads(file.read_text())["address"]
-        procs.append(subprocess.Popen([str(BIN / "dask"), "worker", address, "--nworkers", "1", "--nthreads",
-                                       "1", "--no-dashboard"], **common))
-        from distributed import Client
-
-        with Client(address, timeout="30s") as client:
-            client.wait_for_workers(1, timeout=60)
-        yield address
-    finally:
-        for proc in procs:
-            if proc.poll() is None:
-                os.killpg(proc.pid, signal.SIGTERM)
-        for proc in procs:
-            try:
-                proc.communicate(timeout=30)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
+    cluster = DaskProcesses(1, tmp_path)
+    request.addfinalizer(cluster.stop)
+    return cluster.start()
 
 
 def test_on_a_dask_cluster_the_same_rows(fleet, tmp_path, dask_cluster):

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from dask_helpers import BIN, DaskProcesses
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PARAM_NAMES
@@ -129,15 +130,28 @@ def test_ctrl_c_stops_workers_and_keeps_finished_trials(tmp_path):
     assert json.loads((out / "study.json").read_text())["runs"][-1]["status"] == "interrupted"
 
 
-def test_dask_local_cluster_gives_identical_results(reference, tmp_path):
-    distributed = pytest.importorskip("distributed")
-    out = tmp_path / "dask"
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster:
-        assert _study(out, "--scheduler", cluster.scheduler_address, "--chunk-trials", "3",
-                      "--no-plots") == 0
-    assert (out / "results.csv").read_bytes() == (reference / "results.csv").read_bytes()
-    assert json.loads((out / "study.json").read_text())["runs"][-1]["workers"] == cluster.scheduler_address
+@pytest.fixture
+def dask_processes(tmp_path, request) -> str:
+    """``dask scheduler`` and two ``dask worker`` processes on localhost; their address."""
+    cluster = DaskProcesses(2, tmp_path)
+    request.addfinalizer(cluster.stop)
+    return cluster.start()
+
+
+def test_a_dask_cluster_of_processes_gives_the_local_results(dask_processes, tmp_path):
+    """The refined method (its std columns too) on two Dask workers, as ``rozyn`` processes."""
+    grid = ["--roads", "iso", "--speeds-kmh", "100", "--durations-s", "20,40", "--trials", "3",
+            "--method", "likelihood", "--no-plots", "--quiet"]
+    local, remote = tmp_path / "local", tmp_path / "dask"
+    runs = ((local, ["--jobs", "1"]), (remote, ["--scheduler", dask_processes, "--chunk-trials", "1"]))
+    for out, workers in runs:
+        done = subprocess.run([str(BIN / "rozyn"), "study", *grid, "--out", str(out), *workers],
+                              capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+    assert (remote / "results.csv").read_bytes() == (local / "results.csv").read_bytes()
+    rows = _rows(remote / "results.csv")
+    assert len(rows) == 6 and all(r["stage"] == "likelihood" and r["mass_kg_std"] for r in rows)
+    assert json.loads((remote / "study.json").read_text())["runs"][-1]["workers"] == dask_processes
 
 
 def test_existing_study_is_not_overwritten(reference, tmp_path, capsys):
