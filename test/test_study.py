@@ -249,6 +249,19 @@ def test_bench_trials_per_second_is_a_rate():
     assert isinstance(rate, float) and math.isfinite(rate) and rate > 0
 
 
+def test_bench_trials_per_second_of_the_refined_method_runs_the_same_mix(monkeypatch):
+    chunks: list[work.Chunk] = []
+    monkeypatch.setattr(work, "run_chunk", chunks.append)
+    study.bench_trials_per_second()
+    rozyn = list(chunks)
+    chunks.clear()
+    rate = study.bench_trials_per_second(method="likelihood")
+    assert rate > 0 and len(rozyn) == 1 + 24  # the warm-up, then one trial per road and duration
+    assert [(c.cell, c.seeds) for c in chunks] == [(c.cell, c.seeds) for c in rozyn]
+    assert {(c.spec.method, c.spec.pipeline_config().refine) for c in chunks} == {("likelihood",) * 2}
+    assert {(c.spec.method, c.spec.pipeline_config().refine) for c in rozyn} == {("rozyn", "none")}
+
+
 def test_a_trial_that_raises_is_an_error_row_not_a_crash(monkeypatch):
     settings = StudySettings(roads=("iso",), speeds_kmh=(50.0,), durations_s=(10.0,), trials=3)
     bad_seed = settings.seed(Cell("iso", 50.0, 10.0), 1)

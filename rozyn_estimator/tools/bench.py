@@ -109,6 +109,7 @@ def run_bench(repeats: int = 20) -> dict[str, Any]:
             max(3, repeats // 2)),
         "trial_100s_iso_ms": _median_ms(lambda: _trial(), max(3, repeats // 4)),
         "study_trials_per_second": _study_trials_per_second(max(1, repeats // 10)),
+        "study_refined_trials_per_second": _study_trials_per_second(max(1, repeats // 20), "likelihood"),
     }
     out["budget_overhead_pct"] = 100.0 * (
         out["refined_update_warm_ms"] / out["refined_update_warm_without_budget_ms"] - 1.0)
@@ -170,8 +171,8 @@ def _trial() -> None:
     run_trial(TrialSpec(), 1)
 
 
-def _study_trials_per_second(repeats: int) -> float:
-    """One core over the thesis grid's mix of measurement times (``rozyn study``)."""
+def _study_trials_per_second(repeats: int, method: str = "") -> float:
+    """One core over the thesis grid's mix of measurement times (``rozyn study [--method]``)."""
     from rozyn_estimator.tools.study import bench_trials_per_second
 
-    return bench_trials_per_second(repeats)
+    return bench_trials_per_second(repeats, method)

@@ -244,13 +244,14 @@ def _progress(total: int, initial: int, enabled: bool) -> Any:
                 dynamic_ncols=True, smoothing=0.05, desc="study", leave=False)
 
 
-def bench_trials_per_second(repeats: int = 1) -> float:
+def bench_trials_per_second(repeats: int = 1, method: str = "") -> float:
     """Trials per second on one core over a spread of the thesis grid (``rozyn bench``).
 
     One trial per (road, duration) at 60 km/h, durations 10 to 120 s: the mix of a full
-    study. Multiply by the cores for a study's rate.
+    study, with ``method`` (default: the study's, Rozyn's pipeline; ``likelihood``: the
+    refined estimator). Multiply by the cores for a study's rate.
     """
-    settings = StudySettings(speeds_kmh=(60.0,), trials=1)
+    settings = StudySettings(speeds_kmh=(60.0,), trials=1, method=method)
     chunks = plan_chunks(settings, set(), 1)
     run_chunk(chunks[0])  # warm-up
     started = time.perf_counter()

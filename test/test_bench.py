@@ -1,0 +1,27 @@
+"""``rozyn bench``: the figures it reports (the timings themselves are replaced here: what
+they measure is each figure's own business, and the full bench takes minutes)."""
+
+from __future__ import annotations
+
+from rozyn_estimator.tools import bench
+
+KEYS = ("sim_100s_at_100hz_ms", "road_generation_ms", "update_120s_window_ms",
+        "update_120s_window_no_variance_ms", "refined_update_cold_ms", "refined_update_warm_ms",
+        "refined_update_warm_without_budget_ms", "glitch_update_warm_ms", "trial_100s_iso_ms",
+        "study_trials_per_second", "study_refined_trials_per_second", "budget_overhead_pct",
+        "glitch_per_clean_update", "peak_rss_mb", "goals")
+
+
+def test_bench_reports_the_refined_studys_rate_next_to_the_others(monkeypatch):
+    studies: list[tuple[int, str]] = []
+
+    def study_rate(repeats: int, method: str = "") -> float:
+        studies.append((repeats, method))
+        return 10.0 if method else 100.0
+
+    monkeypatch.setattr(bench, "_median_ms", lambda fn, repeats: 1.0)
+    monkeypatch.setattr(bench, "_study_trials_per_second", study_rate)
+    out = bench.run_bench(repeats=20)
+    assert tuple(out) == KEYS
+    assert out["study_trials_per_second"] == 100.0 and out["study_refined_trials_per_second"] == 10.0
+    assert studies == [(2, ""), (1, "likelihood")]
