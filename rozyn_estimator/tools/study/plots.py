@@ -28,7 +28,7 @@ from typing import Any
 
 import matplotlib
 import numpy as np
-from matplotlib import colors
+from matplotlib import colors, ticker
 from matplotlib.figure import Figure
 
 from rozyn_estimator.method import PARAM_NAMES
@@ -248,6 +248,8 @@ def precision_lines(settings: StudySettings, summaries: Sequence[CellSummary], r
         finite = rel[:, :, k][np.isfinite(rel[:, :, k]) & (rel[:, :, k] > 0)]
         if finite.size and finite.max() > 5 * finite.min():
             top.set_yscale("log")
+            top.yaxis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))  # 0.1, 1, 10
+            top.yaxis.set_minor_formatter(ticker.FuncFormatter(_minor_label))  # 0.2, 0.3, 0.5, 2
         top.set(ylabel=f"std of {SYMBOLS[name]} [% of truth]", title=f"{NAMES[name]} {SYMBOLS[name]}: std")
         top.grid(True, which="both", alpha=0.3)
         if coverage:
@@ -275,6 +277,11 @@ def precision_lines(settings: StudySettings, summaries: Sequence[CellSummary], r
                  + (" and the share of trials whose estimate ± 1.96 std holds the truth" if coverage else "")
                  + f"\n{road_label(settings, road)}, method {settings.method}")
     return fig
+
+
+def _minor_label(value: float, _: int) -> str:
+    """A log axis' minor tick as a plain number at 2, 3 and 5 times a power of ten, else none."""
+    return f"{value:g}" if value > 0 and f"{value:.0e}"[0] in "235" else ""
 
 
 def _cell_params(rows: Sequence[TrialRow], cell: Cell) -> np.ndarray:
