@@ -144,3 +144,25 @@ def test_corner_impedance_static_limit(vehicle):
     for model in ("eq2-21", "eq2-22", "condensed"):
         zf, _ = corner_impedances(vehicle, 1e-9, model)
         assert zf.real == pytest.approx(45000 * 200000 / 245000, rel=1e-6)
+
+
+def test_warm_updates_carry_the_guard_and_run_the_jackknife_only_on_fallback(vehicle):
+    """A warm refined update skips Rozyn's jackknife (its std only scales the refinement's
+    guard: the previous window's serves) and publishes the same estimate; when the
+    refinement fails, the fallback is Rozyn's estimate with its jackknife covariance."""
+    live = Simulation(SimConfig(road=RoadSpec(amplitudes="gaussian"), seed=4, noise_std_mps2=0.05))
+    first = live.run(120.0).accel_mps2
+    cold = estimate(first, 100.0, vehicle, PipelineConfig(), 100 / 3.6)
+    assert cold.stage == "likelihood" and cold.rozyn.covariance is not None
+    assert np.allclose(cold.guard_std, cold.rozyn.statistical_std)
+    following = np.vstack([first[500:], live.run(5.0).accel_mps2])
+    warm = estimate(following, 100.0, vehicle, PipelineConfig(), 100 / 3.6, warm_start=cold)
+    assert warm.stage == "likelihood" and warm.rozyn.ok and warm.rozyn.covariance is None
+    assert np.array_equal(warm.guard_std, cold.guard_std)
+    from_params = estimate(following, 100.0, vehicle, PipelineConfig(), 100 / 3.6, warm_start=cold.params)
+    assert from_params.rozyn.covariance is not None  # no refinement to carry the guard from
+    assert np.allclose(warm.params, from_params.params, rtol=1e-4)
+    failing = PipelineConfig(likelihood=PipelineConfig().likelihood.__class__(max_noise_share=1e-9))
+    fallback = estimate(following, 100.0, vehicle, failing, 100 / 3.6, warm_start=cold)
+    assert fallback.ok and fallback.stage == "rozyn" and fallback.covariance is not None
+    assert any("likelihood refinement failed" in note for note in fallback.notes)

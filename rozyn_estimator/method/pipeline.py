@@ -64,6 +64,7 @@ class Estimate:
     refinement: Refinement | None = None
     budget: Budget | None = None  # the covariance's statistical and systematic parts
     glitches: tuple[int, ...] = (0, 0)  # samples gated as glitches (front, rear): method/glitches.py
+    guard_std: np.ndarray | None = None  # (3,) Rozyn's std the refinement's guard used (see estimate)
 
     @property
     def ok(self) -> bool:
@@ -149,12 +150,27 @@ def estimate(
         y, gated = _checked(accel, fs_hz, cfg)
     except InputError as exc:
         return _failed(str(exc), int(accel.shape[0]) if accel.ndim >= 1 else 0, started)
-    rozyn = _rozyn_stage(y, fs_hz, vehicle, cfg, speed, started)
+    # A warm refined update needs Rozyn's std only for the refinement's guard (a scale of
+    # 6 std against wrong basins): the previous window's serves (the windows overlap), and
+    # Rozyn's jackknife — most of its stage's time — runs only if the refinement fails.
+    carried = _carried_guard_std(warm_start) if cfg.refine != "none" and cfg.variance != "none" else None
+    rozyn = _rozyn_stage(y, fs_hz, vehicle, cfg if carried is None else cfg.replace(variance="none"), speed,
+                         started)
     if cfg.refine == "none":
         est = _with_budget(rozyn, vehicle, cfg)
     else:
-        est = _refined(rozyn, y, fs_hz, vehicle, cfg, profile, warm_start, started)
+        est = _refined(rozyn, y, fs_hz, vehicle, cfg, profile, warm_start, started, carried)
     return dataclasses.replace(est, glitches=gated) if any(gated) else est
+
+
+def _carried_guard_std(warm_start: Estimate | np.ndarray | None) -> np.ndarray | None:
+    """The previous refined update's guard std, when it had a successful refinement."""
+    previous = warm_start.refinement if isinstance(warm_start, Estimate) else None
+    if previous is None or not previous.ok:
+        return None
+    assert isinstance(warm_start, Estimate)
+    std = warm_start.guard_std
+    return std if std is not None and np.all(np.isfinite(std)) else None
 
 
 def _speed(speed_mps: float | np.ndarray | None) -> tuple[float | None, float | np.ndarray | None]:
@@ -216,15 +232,20 @@ def _failed(reason: str, n: int, started: float, **extra: Any) -> Estimate:
 def _refined(
     rozyn: Estimate, y: np.ndarray, fs_hz: float, vehicle: Vehicle, cfg: PipelineConfig,
     speed: float | np.ndarray | None, warm_start: Estimate | np.ndarray | None, started: float,
+    carried: np.ndarray | None = None,
 ) -> Estimate:
-    """The likelihood refinement after Rozyn's stage, with its fallbacks."""
+    """The likelihood refinement after Rozyn's stage, with its fallbacks (``carried``: the
+    guard's std from the previous window, Rozyn's stage then ran without its variance)."""
     n = rozyn.n_samples
     warm = _warm(warm_start)
+    guard_std = rozyn.statistical_std if carried is None else carried
     if speed is None:
         ref = Refinement(status="failed", reason="the speed is unknown (it sets the wheelbase delay)")
     else:
-        ref = refine(y, fs_hz, vehicle, rozyn.params, speed, cfg.likelihood, warm=warm,
-                     start_std=rozyn.statistical_std)
+        ref = refine(y, fs_hz, vehicle, rozyn.params, speed, cfg.likelihood, warm=warm, start_std=guard_std)
+    if not ref.ok and carried is not None:  # the fallback publishes Rozyn's estimate: with its variance
+        mean = None if speed is None else float(np.mean(speed))
+        rozyn = _rozyn_stage(y, fs_hz, vehicle, cfg, mean, started)
     elapsed = (time.perf_counter() - started) * 1e3
     if ref.ok:
         origin = "the previous estimate" if warm is not None else "a coarse grid"
@@ -238,7 +259,7 @@ def _refined(
             status="ok", params=ref.params, covariance=budget.total if budget else ref.covariance,
             budget=budget, modes=rozyn.modes, a0=rozyn.a0,
             n_samples=n, elapsed_ms=elapsed, notes=notes + ref.notes, stage="likelihood",
-            rozyn=rozyn, refinement=ref,
+            rozyn=rozyn, refinement=ref, guard_std=guard_std,
         )
     if rozyn.ok:
         return dataclasses.replace(

@@ -38,8 +38,11 @@ class LikelihoodConfig:
                                    low=0.0, open_low=True, high=1.0)
     covariance: str = param("expected", "information in the covariance sandwich: expected or observed",
                             choices=COVARIANCES)
+    grid_hz: float = param(0.05, "the model is evaluated this far apart and interpolated between (0: at "
+                           "every Fourier bin)", unit="Hz", low=0.0, high=0.1)
     max_iter: int = param(100, "optimiser iterations per start", low=1)
-    tol: float = param(1e-4, "convergence: Newton decrement below this", low=0.0, open_low=True)
+    tol: float = param(1e-3, "convergence: Newton decrement below this (ℓ within half of it of the optimum)",
+                       low=0.0, open_low=True)
     noise_start: float = param(1e-3, "the starts' noise floors, share of each channel's band power",
                                low=0.0, open_low=True, high=1.0)
     block_s: float = param(12.0, "time blocks of the covariance's empirical score variance", unit="s",

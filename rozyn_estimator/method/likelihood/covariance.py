@@ -18,6 +18,7 @@ the road intensity's drift regressed out) estimates it whatever the road; the pu
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 from scipy import fft as sfft
@@ -25,7 +26,7 @@ from scipy.signal import windows
 
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
-from rozyn_estimator.method.likelihood.objective import WhittleObjective, inv2
+from rozyn_estimator.method.likelihood.objective import WhittleObjective, inv2, mul2
 
 _NOISE_AT_ZERO = 1e-5  # a noise floor below this share of its channel's band power is zero
 _INCOHERENCE_AT_ZERO = 1e-6
@@ -158,14 +159,12 @@ def _block_variances(objective: WhittleObjective, theta: np.ndarray, combos: np.
     if spectra.dft is None or n_blocks < _MIN_BLOCKS or accel.shape[0] != n:
         return None
     psi = _score_series(objective, theta, combos)
-    weights = _partition(n, n_blocks)
-    w2 = windows.tukey(n, taper) ** 2 if taper > 0 else np.ones(n)
-    share = weights @ (w2 / w2.sum())  # each block's share of the score's expectation
+    weights, slopes, share = _partition(n, n_blocks, taper)
     G = weights @ psi.T  # (B, 3)
     G -= share[:, None] * G.sum(axis=0)
     y = accel - accel.mean(axis=0)
     power = _moving_average(np.einsum("ta,ta->t", y, y), max(1, round(fs)))
-    drift = -(np.gradient(weights, axis=1) @ power)
+    drift = -(slopes @ power)
     drift -= share * drift.sum()
     dof = n_blocks - 1
     if drift @ drift > 0:
@@ -188,7 +187,7 @@ def _score_series(objective: WhittleObjective, theta: np.ndarray, combos: np.nda
         raise ValueError("the score's time series needs the window's DFT (Spectra.dft)")
     S, dS = objective.model_at(theta)
     inv = inv2(S)[0]
-    A = inv[None] @ np.tensordot(combos, dS, axes=1) @ inv[None]  # (q, k, 2, 2)
+    A = mul2(mul2(inv, np.tensordot(combos, dS, axes=1)), inv)  # (q, k, 2, 2)
     k0, k = spectra.first_bin, d.shape[0]
     full = np.zeros((1 + combos.shape[0], n // 2 + 1, 2), dtype=complex)  # ỹ and the filtered ẽ
     full[0, k0: k0 + k] = d
@@ -197,9 +196,12 @@ def _score_series(objective: WhittleObjective, theta: np.ndarray, combos: np.nda
     return np.einsum("ta,qta->qt", series[0], series[1:]) / (2.0 * fs)
 
 
-def _partition(n: int, n_blocks: int) -> np.ndarray:
-    """(B, n) a smooth partition of unity: B blocks, each rising and falling over a block's
-    length with raised cosines (each sample shared by at most two neighbouring blocks)."""
+@lru_cache(maxsize=8)
+def _partition(n: int, n_blocks: int, taper: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(B, n) a smooth partition of unity — B blocks, each rising and falling over a block's
+    length with raised cosines (each sample shared by at most two neighbouring blocks) —,
+    its slopes along time, and each block's share of the tapered window's power (the
+    score's expectation). Cached: consecutive windows share it."""
     length = n / n_blocks
     t = (np.arange(n) + 0.5) / length - 0.5  # block centres at 0, 1, ..
     out = np.zeros((n_blocks, n))
@@ -211,7 +213,13 @@ def _partition(n: int, n_blocks: int) -> np.ndarray:
         if b == n_blocks - 1:
             v[t > n_blocks - 1] = 1.0
         out[b] = v
-    return out / out.sum(axis=0)
+    weights = out / out.sum(axis=0)
+    w2 = windows.tukey(n, taper) ** 2 if taper > 0 else np.ones(n)
+    slopes = np.gradient(weights, axis=1)
+    share = weights @ (w2 / w2.sum())
+    for a in (weights, slopes, share):
+        a.flags.writeable = False  # shared by the cache
+    return weights, slopes, share
 
 
 def _moving_average(x: np.ndarray, width: int) -> np.ndarray:

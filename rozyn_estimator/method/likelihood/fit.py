@@ -19,10 +19,12 @@ the fit stops when the Newton decrement ``gᵀF⁻¹g`` is below ``tol``. ``spec
 uses the auto-spectra only (for comparison).
 
 Starts and the guard against wrong basins (a basin that explains one channel as noise
-exists): cold, the fit runs from the given start (Rozyn's estimate) and from the best
-point of a coarse grid of body frequencies and CoG positions, and keeps the lower ℓ;
-warm, from the previous window's optimum, and from the given start too when the result
-disagrees with it by more than 6 of its standard deviations. A result that still
+exists): cold, the fit runs from the given start (Rozyn's estimate), and from the best
+point of a coarse grid of body frequencies and CoG positions too when the result
+disagrees with the start by more than 6 of its standard deviations or explains a channel
+as mostly noise (without a usable start, from the grid's two best points); warm, from
+the previous window's optimum, and from the given start too when the result disagrees
+with it by more than 6 of its standard deviations. The lower ℓ wins; a result that still
 explains a channel as mostly noise is refused.
 """
 
@@ -108,9 +110,11 @@ def refine(
 ) -> Refinement:
     """Maximum-likelihood (m, I, lf) from a window, started from ``start``.
 
-    Cold (no ``warm``), the fit runs from ``start`` and from the best point of a coarse
-    grid, and keeps the lower ℓ. Warm, it runs from the previous optimum, and from
-    ``start`` as well only if the result disagrees with it by more than 6 ``start_std``.
+    Cold (no ``warm``), the fit runs from ``start``, and from the best point of a coarse
+    grid as well if the result disagrees with it by more than 6 ``start_std`` (or explains
+    a channel as noise), and keeps the lower ℓ. Warm, it runs from the previous optimum,
+    and from ``start`` as well only if the result disagrees with it by more than 6
+    ``start_std``.
 
     Args:
         accel_mps2: (n, 2) front/rear vertical accelerations on a uniform grid, finite.
@@ -171,7 +175,8 @@ def _refine(
                             min_noise_psd=tuple(_MIN_NOISE * band_power(spectra)),
                             road_shape_terms=cfg.road_shape_terms,
                             estimate_incoherence=cfg.estimate_incoherence,
-                            window_weights=spectra.window_weights)
+                            window_weights=spectra.window_weights,
+                            grid_step=_bins(cfg.grid_hz, spectra))
     objective = WhittleObjective(model, spectra, cfg.spectra)
     fits = _Fits(objective, cfg)
     given = start if start is not None and _physical(start, L) else None  # a usable start
@@ -189,12 +194,17 @@ def _refine(
         if cfg.second_start and (first is None or not _agrees(model.physical(first.x), start, start_std)):
             fits.run(_start_theta(model, spectra, given, cfg.noise_start) if given is not None else
                      _grid_starts(objective, spectra, vehicle, cfg.noise_start)[0])
+    elif given is not None:
+        # Cold: the given start; the best point of a coarse grid as well when the result
+        # disagrees with the start (as warm), or explains a channel as mostly noise.
+        fits.run(_start_theta(model, spectra, given, cfg.noise_start))
+        first = fits.best
+        if cfg.second_start and (first is None or not _agrees(model.physical(first.x), start, start_std)
+                                 or _noise_share(first.x, objective).max() > cfg.max_noise_share):
+            fits.run(_grid_starts(objective, spectra, vehicle, cfg.noise_start)[0])
     else:
-        # Cold: the given start and the best point of a coarse grid (or the grid's two best).
-        starts = [_start_theta(model, spectra, given, cfg.noise_start)] if given is not None else []
-        if cfg.second_start or given is None:
-            starts += _grid_starts(objective, spectra, vehicle, cfg.noise_start)
-        for th0 in starts[: 2 if cfg.second_start else 1]:
+        # Cold without a usable start: the coarse grid's two best points.
+        for th0 in _grid_starts(objective, spectra, vehicle, cfg.noise_start)[: 2 if cfg.second_start else 1]:
             fits.run(th0)
     best, iterations = fits.best, fits.iterations
     if best is None or not np.isfinite(best.fun):
@@ -253,8 +263,13 @@ def _grid_starts(
     return [theta for _, _, theta in scored[:2]]
 
 
+def _noise_share(theta: np.ndarray, objective: WhittleObjective) -> np.ndarray:
+    """(front, rear) fitted noise floor, share of each channel's power in the band."""
+    return np.exp(theta[4:6]) / objective.band_power
+
+
 def _check_noise(theta: np.ndarray, objective: WhittleObjective, cfg: LikelihoodConfig) -> None:
-    share = np.exp(theta[4:6]) / objective.band_power
+    share = _noise_share(theta, objective)
     for name, value in zip(CORNERS, share, strict=True):
         if value > cfg.max_noise_share:
             raise _FitError(
@@ -315,10 +330,15 @@ def _start(
     theta = model.theta(params, 1.0, noise_share * power)
     S, _ = model.spectrum(theta, derivatives=False)
     floor = np.diag(noise_share * power + model.min_noise_psd)
-    road = np.einsum("kaa->", S - floor).real / spectra.freq_hz.size
+    road = np.einsum("kaa->", S - floor).real / S.shape[0]
     scale = max(float(np.sum(power)) / road, 1e-300)
     theta[3] = math.log(scale)
     return theta, scale * (S - floor) + floor
+
+
+def _bins(width_hz: float, spectra: Spectra) -> int:
+    """Fourier bins in ``width_hz`` (at least one)."""
+    return max(1, int(width_hz * spectra.n_samples / spectra.fs_hz))
 
 
 def _check(params: np.ndarray, cov: np.ndarray, L: float) -> None:

@@ -73,7 +73,12 @@ def model_fit(objective: WhittleObjective, theta: np.ndarray, n_free: int,
         raise ValueError("the model-fit check needs the window's DFT (Spectra.dft)")
     S, _ = objective.model.spectrum(theta, derivatives=False)  # the full model, also for an auto fit
     d = spectra.dft / math.sqrt(spectra.n_samples * spectra.fs_hz)
-    w = np.linalg.solve(np.linalg.cholesky(S), d[..., None])[..., 0]
+    # w = L⁻¹ d with S = L Lᴴ (Cholesky, written out for 2x2: numpy's loops per matrix)
+    l11 = np.sqrt(S[:, 0, 0].real)
+    l21 = S[:, 1, 0] / l11
+    l22 = np.sqrt(S[:, 1, 1].real - np.abs(l21) ** 2)
+    w1 = d[:, 0] / l11
+    w = np.column_stack([w1, (d[:, 1] - l21 * w1) / l22])
     f = spectra.freq_hz
     edges = np.geomspace(f[0], f[-1] * (1 + 1e-9), N_BANDS + 1)
     kappa = _neighbour_correlation(spectra.window_dft)

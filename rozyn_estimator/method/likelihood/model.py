@@ -44,6 +44,7 @@ from numpy.polynomial import legendre
 from scipy import special
 
 from rozyn_estimator.method.likelihood.corners import CORNERS, CornerState, corner_outer
+from rozyn_estimator.method.likelihood.grid import Reduction, reduction
 from rozyn_estimator.method.likelihood.road_input import delay_characteristic
 from rozyn_estimator.vehicle import Vehicle
 
@@ -77,6 +78,8 @@ class HalfCarSpectrum:
         min_noise_psd: (front, rear) white floor added to the fitted noise [(m/s²)²/Hz]:
             keeps S positive definite when the data are noise-free (θ's noise floor then
             runs to zero and stops mattering).
+        grid_step: the model is evaluated on every ``grid_step``-th bin and interpolated
+            (:mod:`.grid`; 1: on every bin).
     """
 
     def __init__(
@@ -86,7 +89,7 @@ class HalfCarSpectrum:
         road_shape_terms: int = 0, estimate_incoherence: bool = False,
         window_weights: np.ndarray | None = None, calibrate_gain: bool = False,
         calibrate_time_offset: bool = False, shape_edges_hz: tuple[float, float] | None = None,
-        corner_terms: tuple[str, ...] = (), sensor_positions: bool = False,
+        corner_terms: tuple[str, ...] = (), sensor_positions: bool = False, grid_step: int = 1,
     ) -> None:
         self.freq_hz, self.fs_hz, self.aliases, self.f_ref_hz = freq_hz, fs_hz, aliases, f_ref_hz
         self._settings: dict[str, Any] = dict(  # what variant() rebuilds the model from
@@ -96,8 +99,8 @@ class HalfCarSpectrum:
             estimate_incoherence=estimate_incoherence, window_weights=window_weights,
             calibrate_gain=calibrate_gain, calibrate_time_offset=calibrate_time_offset,
             shape_edges_hz=shape_edges_hz, corner_terms=corner_terms, sensor_positions=sensor_positions,
+            grid_step=grid_step,
         )
-        self.n_freq = freq_hz.size
         # A tapered periodogram's expectation is S smoothed by the taper's spectral window:
         # the model runs on the grid extended by J Fourier bins each side (above 0 Hz).
         c = np.ones(1) if window_weights is None else np.asarray(window_weights, dtype=float)
@@ -110,17 +113,24 @@ class HalfCarSpectrum:
         self.kernel = c / c.sum()
         self.half = half
         self.n_ext = freq_hz.size + 2 * half
-        grid = freq_hz[0] + df * np.arange(-half, freq_hz.size + half) if half else freq_hz
+        self.n_freq = freq_hz.size
+        # the grid the model is evaluated on: every grid_step-th bin of the extended grid
+        self.reduction: Reduction = reduction(freq_hz.size, self.kernel, grid_step)
+        self.n_eval = self.reduction.nodes.size
+        grid = freq_hz[0] + df * (self.reduction.nodes - half) if half or grid_step > 1 else freq_hz
         shifts = np.arange(-aliases, aliases + 1)[:, None] * fs_hz
-        f = (grid[None, :] + shifts).ravel()  # (A (k + 2J),) signed
+        f = (grid[None, :] + shifts).ravel()  # (A n_eval,) signed
         self.n_alias = 2 * aliases + 1
         self.omega = 2.0 * np.pi * f
         self.log_shape = np.log(np.abs(f) / f_ref_hz)  # road shape r = exp((2 - w) log_shape + ...)
         # Legendre polynomials of degree 2.. in log frequency across the band (held at
-        # their edge values outside it, e.g. at the aliases): the road's departure from a
-        # power law.
+        # their edge values at the aliases; continued smoothly over the few bins the grid
+        # extends beyond the band, which the interpolation from a coarse grid needs): the
+        # road's departure from a power law.
         edges = np.log(np.array(shape_edges_hz or (freq_hz.min(), freq_hz.max())) / f_ref_hz)
-        x = np.clip((2.0 * self.log_shape - edges.sum()) / (edges[1] - edges[0]), -1.0, 1.0)
+        x = (2.0 * self.log_shape - edges.sum()) / (edges[1] - edges[0])
+        aliased = np.repeat(np.arange(-aliases, aliases + 1) != 0, grid.size)
+        x[aliased] = np.clip(x[aliased], -1.0, 1.0)
         self.shape_basis = np.array([legendre.legval(x, np.eye(road_shape_terms + 2)[d])
                                      for d in range(2, road_shape_terms + 2)])
         self.speed_mps = speed_mps
@@ -243,10 +253,11 @@ class HalfCarSpectrum:
         """S (k, 2, 2) and, if asked, dS/dθ (n_params, k, 2, 2) (None when not asked); with
         ``rows`` only the derivatives by those parameters, in that order.
 
-        ``smooth=False``: S on the extended grid (k + 2J), without the taper's smoothing
-        (no derivatives). Where θ is so far from any vehicle that a value overflows, S and
-        dS are NaN: every likelihood reads that as impossible (the one guard for optimiser
-        steps, warm starts and calibration steps that wander off).
+        ``smooth=False``: S on the evaluation grid, without the taper's smoothing (no
+        derivatives; :meth:`fine` takes it to the extended grid). Where θ is so far from any
+        vehicle that a value overflows, S and dS are NaN: every likelihood reads that as
+        impossible (the one guard for optimiser steps, warm starts and calibration steps
+        that wander off).
         """
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             S, dS = self._spectrum(theta, derivatives, smooth, rows)
@@ -375,18 +386,15 @@ class HalfCarSpectrum:
             factor = delay if factor is None else factor * delay
         return None if factor is None else np.broadcast_to(factor, self.omega.shape)
 
+    def fine(self, m: np.ndarray) -> np.ndarray:
+        """Unsmoothed spectra on the evaluation grid (..., n_eval, 2, 2) -> the extended grid
+        of the band's bins (..., k + 2J, 2, 2)."""
+        return self.reduction.fine(m)
+
     def _smooth(self, m: np.ndarray) -> np.ndarray:
-        """The taper's spectral window applied along frequency: (..., k + 2J, 2, 2) -> (..., k, 2, 2)."""
-        if self.kernel.size == 1:
-            return m
-        k = self.n_freq
-        # in place, through one scratch array: a fresh large temporary per tap costs more in
-        # page faults than the arithmetic
-        out = np.multiply(m[..., :k, :, :], self.kernel[0])
-        scratch = np.empty_like(out)
-        for j, c in enumerate(self.kernel[1:], start=1):
-            out += np.multiply(m[..., j: j + k, :, :], c, out=scratch)
-        return out
+        """The taper's spectral window applied along frequency (and the interpolation from
+        the evaluation grid): (..., n_eval, 2, 2) -> (..., k, 2, 2) at the band's bins."""
+        return self.reduction.bins(m)
 
     @staticmethod
     def _diagonal(m: np.ndarray) -> np.ndarray:
@@ -396,14 +404,14 @@ class HalfCarSpectrum:
         return out
 
     def _outer_sum(self, a: list[np.ndarray], b: list[np.ndarray], weight: np.ndarray) -> np.ndarray:
-        """Σ_c weight a_c b_cᴴ folded over the aliases: (k + 2J, 2, 2) on the extended grid."""
+        """Σ_c weight a_c b_cᴴ folded over the aliases: (n_eval, 2, 2) on the evaluation grid."""
         out = sum(np.einsum("af,bf->fab", ac, bc.conj()) for ac, bc in zip(a, b, strict=True))
         return self._fold(out, weight)
 
     def _fold(self, m: np.ndarray, weight: np.ndarray) -> np.ndarray:
-        """(..., F, 2, 2) on the aliased grid, weighted, summed over the aliases: (..., k + 2J, 2, 2)."""
+        """(..., F, 2, 2) on the aliased grid, weighted, summed over the aliases: (..., n_eval, 2, 2)."""
         out = m * weight[:, None, None]
-        return out.reshape(*m.shape[:-3], self.n_alias, self.n_ext, 2, 2).sum(axis=-4)
+        return out.reshape(*m.shape[:-3], self.n_alias, self.n_eval, 2, 2).sum(axis=-4)
 
     @staticmethod
     def _hermitian_part(m: np.ndarray) -> np.ndarray:

@@ -29,6 +29,9 @@ from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power
 
 _NEAR = 10.0  # Newton decrement below which the optimiser uses the sharper Hessian
+# The score covariance's sum over frequency takes one bin in this width (the midpoint rule on
+# a smooth summand: 1e-6 of the covariance at 120 s, 1e-5 at 20 s)
+_SUM_STEP_HZ = 0.05
 
 
 def inv2(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -40,6 +43,12 @@ def inv2(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         inv[:, 0, 0], inv[:, 1, 1] = S[:, 1, 1] / det, S[:, 0, 0] / det
         inv[:, 0, 1], inv[:, 1, 0] = -S[:, 0, 1] / det, -S[:, 1, 0] / det
     return inv, det
+
+
+def mul2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Products of stacked 2x2 matrices (..., 2, 2), broadcast: numpy's ``@`` loops over the
+    stack one tiny matrix at a time, this is four vectorised multiply-adds (5-10x faster)."""
+    return a[..., :, 0, None] * b[..., None, 0, :] + a[..., :, 1, None] * b[..., None, 1, :]
 
 
 def whitened(S: np.ndarray, dS: np.ndarray) -> np.ndarray:
@@ -65,21 +74,22 @@ def whitened(S: np.ndarray, dS: np.ndarray) -> np.ndarray:
     return np.concatenate([w11, w22, root2 * w21.real, root2 * w21.imag], axis=1).reshape(p, -1)
 
 
-def _v(inv: np.ndarray, dS: np.ndarray) -> np.ndarray:
-    """The ``V_i = S⁻¹ ∂_i S``, (p, k, 2, 2)."""
-    return inv[None, :, :, :1] * dS[:, :, None, 0] + inv[None, :, :, 1:] * dS[:, :, None, 1]
+def _exact_rows(
+    inv: np.ndarray, dS: np.ndarray, M: np.ndarray, fisher: np.ndarray, rows: slice
+) -> np.ndarray:
+    """Rows ``rows`` of the Hessian of ℓ without the terms of ∂²S: with ``V_i = S⁻¹ ∂_i S`` and
+    ``M = S⁻¹ I``, ``Σ_k tr(V_i V_j M) + tr(V_j V_i M) - tr(V_i V_j)``
+    (its expectation, at ``M = 1``, is the Fisher information).
 
-
-def _exact_rows(V: np.ndarray, SiI: np.ndarray, fisher: np.ndarray, rows: slice) -> np.ndarray:
-    """Rows ``rows`` of the Hessian of ℓ without the terms of ∂²S: with ``M = S⁻¹ I``,
-    ``Σ_k tr(V_i V_j M) + tr(V_j V_i M) - tr(V_i V_j)`` (its expectation, at ``M = 1``, is
-    the Fisher information)."""
-    p = V.shape[0]
-    VM = V[..., :1] * SiI[None, :, None, 0] + V[..., 1:] * SiI[None, :, None, 1]
-    flat, flat_m = V.reshape(p, -1), VM.transpose(0, 1, 3, 2).reshape(p, -1)
-    B_rows = (flat[rows] @ flat_m.T).real  # B[rows, :]
-    B_cols = (flat @ flat_m[rows].T).real  # B[:, rows]
-    return B_rows + B_cols.T - fisher[rows]
+    By the trace's cyclic property the first two terms are ``tr(Z_i ∂_j S)`` with
+    ``Z_i = (M V_i + V_i M) S⁻¹``: only the rows' ``V_i`` are formed, and the sum over the
+    parameters ``j`` is one matrix product (as the gradient's).
+    """
+    V = mul2(inv, dS[rows])
+    Z = mul2(mul2(M, V) + mul2(V, M), inv)  # (r, k, 2, 2)
+    p = dS.shape[0]
+    both = (Z.transpose(0, 1, 3, 2).reshape(Z.shape[0], -1) @ dS.reshape(p, -1).T).real
+    return both - fisher[rows]
 
 
 @dataclass(frozen=True)
@@ -109,8 +119,7 @@ class WhittleObjective:
         self.model = model
         self.prior = prior
         self.auto = spectra_kind == "auto"
-        per = spectra.periodogram
-        self.periodogram = self.restrict(per)
+        self.periodogram = self.restrict(spectra.periodogram)
         self.band_power = band_power(spectra)
         self.window_dft = spectra.window_dft
         self.spectra = spectra
@@ -120,6 +129,7 @@ class WhittleObjective:
         self._model: tuple[np.ndarray, np.ndarray] | None = None  # (S, dS) at the cached θ, restricted
         self._fisher: np.ndarray | None = None
         self._hess: np.ndarray | None = None
+        self._rows: np.ndarray | None = None
 
     def restrict(self, m: np.ndarray) -> np.ndarray:
         """Stacked 2x2 matrices (..., 2, 2) as the fit sees them: unchanged, or for the
@@ -139,7 +149,7 @@ class WhittleObjective:
         inv, det = inv2(S)
         if not (np.all(np.isfinite(det)) and np.all(det > 0) and np.all(S[:, 0, 0].real > 0)):
             return math.inf, inv, inv
-        SiI = inv @ self.periodogram
+        SiI = mul2(inv, self.periodogram)
         return float(np.sum(np.log(det)) + np.einsum("kaa->", SiI).real), inv, SiI
 
     def evaluate(self, theta: np.ndarray) -> tuple[float, np.ndarray]:
@@ -160,13 +170,13 @@ class WhittleObjective:
         if not math.isfinite(nll):
             value, self._parts = (math.inf, np.zeros(p)), None
         else:
-            W = inv - SiI @ inv  # S⁻¹ - S⁻¹ I S⁻¹
+            W = inv - mul2(SiI, inv)  # S⁻¹ - S⁻¹ I S⁻¹
             grad = (dS.reshape(p, -1) @ W.transpose(0, 2, 1).ravel()).real  # Σ_k tr(∂S W)
             if self.prior is not None:
                 penalty, slope = self.prior.penalty(np.asarray(theta, dtype=float))
                 nll, grad = nll + penalty, grad + slope
             value, self._parts = (nll, grad), (inv, dS, SiI)
-        self._key, self._value, self._fisher, self._hess = key, value, None, None
+        self._key, self._value, self._fisher, self._hess, self._rows = key, value, None, None, None
         return value
 
     def model_at(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -181,6 +191,15 @@ class WhittleObjective:
     def jac(self, theta: np.ndarray) -> np.ndarray:
         return self.evaluate(theta)[1]
 
+    def whitened_rows(self, theta: np.ndarray) -> np.ndarray:
+        """:func:`whitened` rows of the model at θ (the Fisher information is ``R Rᵀ``), cached."""
+        self.evaluate(theta)
+        if self._rows is None:
+            if self._model is None:
+                raise ValueError("no model at θ")
+            self._rows = whitened(*self._model)
+        return self._rows
+
     def fisher(self, theta: np.ndarray) -> np.ndarray:
         """The Fisher information at θ (the expected Hessian of ℓ, the prior's included)."""
         self.evaluate(theta)
@@ -188,7 +207,7 @@ class WhittleObjective:
             if self._parts is None or self._model is None:
                 self._fisher = np.eye(self.model.n_params)
             else:
-                rows = whitened(self._model[0], self._parts[1])
+                rows = self.whitened_rows(theta)
                 fisher = rows @ rows.T
                 if self.prior is not None:
                     fisher = fisher + np.diag(self.prior.precision)
@@ -212,7 +231,8 @@ class WhittleObjective:
                 data = fisher if self.prior is None else fisher - np.diag(self.prior.precision)
                 if self.prior is not None:  # the data's gradient: the prior's slope is not S's
                     grad = grad - self.prior.penalty(np.asarray(theta, dtype=float))[1]
-                exact = _exact_rows(_v(*self._parts[:2]), self._parts[2], data, slice(3, 6))
+                inv, dS, SiI = self._parts
+                exact = _exact_rows(inv, dS, SiI, data, slice(3, 6))
                 road = [j for j in range(self.model.n_params) if j not in (4, 5)]
                 exact[0, road] += grad[road]  # and, by symmetry, the column of the road intensity
                 exact[1, 4] += grad[4]
@@ -249,34 +269,84 @@ class WhittleObjective:
         of the fitted likelihood (diagonal for the auto-spectra fit) and
         ``C_kk' = E[d_k d_k'ᴴ] = Σ_j ŵ_j ŵ*_(j+k'-k) S(f_(k-j))`` (Isserlis' theorem for
         complex Gaussian DFT coefficients). Untapered and cross-spectral it is the Fisher
-        information; it adds what the auto-spectra fit ignores (the channels' correlation)
-        and what a taper correlates (neighbouring ordinates).
+        information; it adds what the auto-spectra fit ignores (the channels'
+        correlation) and what a taper correlates (neighbouring ordinates).
 
         Args:
             combos: (q, n_params) linear combinations of the score wanted.
         """
         model = self.model
-        S_ext, _ = model.spectrum(theta, derivatives=False, smooth=False)
+        S_ext = model.fine(model.spectrum(theta, derivatives=False, smooth=False)[0])
         S, dS = self.model_at(theta)
         inv = inv2(S)[0]
-        dS = np.tensordot(combos, dS, axes=1)  # (q, k, 2, 2)
-        A = inv[None] @ dS @ inv[None]
-        half, k = model.half, model.n_freq
+        A = mul2(mul2(inv, np.tensordot(combos, dS, axes=1)), inv)  # (q, k, 2, 2)
         c = np.abs(self.window_dft) ** 2
         centre = (c.size - 1) // 2
-        w_hat = self.window_dft[centre - half: centre + half + 1]  # as the model's kernel
-        q = A.shape[0]
-        out = np.zeros((q, q))
-        # Offsets whose window products are all below 1 % add < 1e-4 of J: skipped.
-        reach = [d for d in range(2 * half + 1)
-                 if np.sum(np.abs(w_hat[: w_hat.size - d] * w_hat[d:])) >= 0.01]
-        top = max(reach) if reach else 0
-        for delta in range(-top, top + 1):
-            # C_(k, k+δ) for the band's k, from S on the extended grid (index k - j + J)
-            C = sum(w_hat[j + half] * np.conj(w_hat[j + delta + half]) * S_ext[half - j: half - j + k]
-                    for j in range(max(-half, -half - delta), min(half, half - delta) + 1))
-            lo, hi = max(0, -delta), min(k, k - delta)
-            X = A[:, lo:hi] @ C[None, lo:hi]
-            Y = A[:, lo + delta: hi + delta] @ C[None, lo:hi].conj().transpose(0, 1, 3, 2)
-            out += (X.reshape(q, -1) @ Y.transpose(0, 1, 3, 2).reshape(q, -1).T).real
-        return 0.5 * (out + out.T)
+        w_hat = self.window_dft[centre - model.half: centre + model.half + 1]  # as the model's kernel
+        step = max(1, int(_SUM_STEP_HZ * self.spectra.n_samples / self.spectra.fs_hz))
+        return _score_covariance(A, S_ext, w_hat, step)
+
+
+def _lag_covariances(
+    S_ext: np.ndarray, w_hat: np.ndarray, bins: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(lags δ, C_(k, k+δ) at the bins ``k`` of ``bins``): (n_δ,), (n_δ, len(bins), 2, 2).
+
+    ``C_(k, k+δ) = Σ_j ŵ_j ŵ*_(j+δ) S_ext(k - j + J)``: one matrix product of the window
+    products with the shifted spectra, for every lag the window reaches (|δ| ≤ 2J: the
+    small window products of the far lags still add up, 9 % of a 20 s window's mass
+    variance when lags below 1 % were cut).
+    """
+    n = w_hat.size  # 2J + 1
+    lags = np.arange(-(n - 1), n)
+    products = np.zeros((lags.size, n), dtype=complex)  # [δ, j + J] = ŵ_j ŵ*_(j+δ)
+    for row, d in enumerate(lags):
+        j = np.arange(max(0, -int(d)), min(n, n - int(d)))
+        products[row, j] = w_hat[j] * np.conj(w_hat[j + d])
+    shifted = S_ext[(n - 1 - np.arange(n))[:, None] + bins[None, :]]  # [j + J, k] = S_ext[J - j + k]
+    C = products @ shifted.reshape(n, -1)
+    return lags, C.reshape(lags.size, bins.size, 2, 2)
+
+
+def _hermitian_numbers(A: np.ndarray) -> np.ndarray:
+    """(..., 4) real numbers (a, d, Re b, Im b) of Hermitian 2x2 ``[[a, b], [b̄, d]]`` (..., 2, 2)."""
+    return np.stack([A[..., 0, 0].real, A[..., 1, 1].real, A[..., 0, 1].real, A[..., 0, 1].imag], axis=-1)
+
+
+def _congruence(C: np.ndarray) -> np.ndarray:
+    """(..., 4, 4) real ``L`` with ``g(Cᴴ A C) = L h(A)`` for Hermitian ``A``, ``h`` its
+    :func:`_hermitian_numbers` and ``g(G) = (G11, G22, 2 Re G12, 2 Im G12)``, so that
+    ``tr(Cᴴ A C A') = g · h(A')``."""
+    x1, x2, y1, y2 = C[..., 0, 0], C[..., 1, 0], C[..., 0, 1], C[..., 1, 1]  # columns x, y of C
+    xx, yy = np.conj(x1) * x2, np.conj(y1) * y2
+    p11, p22, p12, p21 = np.conj(x1) * y1, np.conj(x2) * y2, np.conj(x1) * y2, np.conj(x2) * y1
+    rows = [
+        [np.abs(x1) ** 2, np.abs(x2) ** 2, 2 * xx.real, -2 * xx.imag],
+        [np.abs(y1) ** 2, np.abs(y2) ** 2, 2 * yy.real, -2 * yy.imag],
+        [2 * p11.real, 2 * p22.real, 2 * (p12.real + p21.real), 2 * (p21.imag - p12.imag)],
+        [2 * p11.imag, 2 * p22.imag, 2 * (p12.imag + p21.imag), 2 * (p12.real - p21.real)],
+    ]
+    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+
+
+def _score_covariance(A: np.ndarray, S_ext: np.ndarray, w_hat: np.ndarray, step: int) -> np.ndarray:
+    """``Σ_(k,k') Re tr(A_ik C_kk' A_jk' C_k'k)`` over the band's bin pairs (A: (q, k, 2, 2)).
+
+    Per lag ``δ = k' - k`` the summand ``tr(C_kk'ᴴ A_ik C_kk' A_(j,k+δ))`` is a smooth function
+    of ``k`` (model quantities only, no data): summed at the centre bin of every ``step``
+    bins, times the bins it stands for (the midpoint rule). With Hermitian ``A`` it is a real
+    bilinear form ``h(A_ik)ᵀ Lᵀ h(A_(j,k+δ))`` (:func:`_congruence`).
+    """
+    q, k = A.shape[:2]
+    starts = np.arange(0, k, max(1, step))
+    counts = np.diff(np.r_[starts, k])
+    bins = starts + (counts - 1) // 2
+    lags, C = _lag_covariances(S_ext, w_hat, bins)
+    h = _hermitian_numbers(A)  # (q, k, 4)
+    g = np.einsum("dkxy,iky->idkx", _congruence(C), h[:, bins])  # (q, n_δ, kc, 4)
+    partner = bins[None, :] + lags[:, None]
+    inside = (partner >= 0) & (partner < k)
+    weight = counts[None, :] * inside  # (n_δ, kc)
+    other = h[:, np.clip(partner, 0, k - 1)] * weight[None, :, :, None]  # (q, n_δ, kc, 4)
+    out = g.reshape(q, -1) @ other.reshape(q, -1).T
+    return 0.5 * (out + out.T)

@@ -15,10 +15,8 @@ the model with ``β`` moved by a small step (the model recomputed, nothing re-fi
 ``lf/L``). A test checks these against the shift of the whole refinement when a value
 really changes.
 
-Why a coarser grid: the sums are smooth in frequency (a body resonance spans ~30 Fourier
-bins of a 120 s window), so every 4th frequency of the band, without the taper's
-smoothing, gives the same ratio of informations for a quarter of the work (one model
-evaluation per step instead of a gradient's worth).
+The information is the objective's own at θ̂ (already computed for the covariance); each
+``∂_βS`` costs two evaluations of the model without derivatives.
 """
 
 from __future__ import annotations
@@ -34,7 +32,6 @@ from rozyn_estimator.method.likelihood.objective import WhittleObjective, whiten
 from rozyn_estimator.tolerances import RELATIVE_FIELDS
 from rozyn_estimator.vehicle import Vehicle
 
-GRID_STEP = 4  # every GRID_STEP-th frequency of the band
 _REL_STEP = 1e-4  # relative step of a stiffness, damping or mass
 _ABS_STEP = {"wheelbase_m": 1e-4, "sensor_front_offset_m": 1e-4, "sensor_rear_offset_m": 1e-4,
              "sensor_gain_front": 1e-4, "sensor_gain_rear": 1e-4, "sensor_time_offset_s": 1e-6}
@@ -55,32 +52,21 @@ def sensitivities(
     """
     if not keys:
         return {}
-    coarse = _coarse(model)
-    S, dS = coarse.spectrum(theta)
-    S, dS = objective.restrict(S), objective.restrict(dS)
-    rows = whitened(S, dS)
-    info = GRID_STEP * rows @ rows.T
-    if objective.prior is not None:
-        info += np.diag(objective.prior.precision)
+    info = objective.fisher(theta)  # the prior's included
+    S, _ = objective.model_at(theta)
+    rows = objective.whitened_rows(theta)
     keep = kept(objective, model, theta, info)
     solve = inverse_information(info[np.ix_(keep, keep)])
     jac = model.physical_jacobian(theta)[:, keep]
     p = model.physical(theta)[2] / model.wheelbase_m
     out = {}
     for key in keys:
-        dS_beta = objective.restrict(_model_derivative(coarse, theta, key))
-        cross = GRID_STEP * rows[keep] @ whitened(S, dS_beta[None])[0]  # Σ_k tr(S⁻¹ ∂_θS S⁻¹ ∂_βS)
+        dS_beta = objective.restrict(_model_derivative(model, theta, key))
+        cross = rows[keep] @ whitened(S, dS_beta[None])[0]  # Σ_k tr(S⁻¹ ∂_θS S⁻¹ ∂_βS)
         out[key] = -jac @ (solve @ cross)
         if key == "wheelbase_m":
             out[key][2] += p  # lf = (lf/L) L: θ holds the share
     return out
-
-
-def _coarse(model: HalfCarSpectrum) -> HalfCarSpectrum:
-    """The model on every GRID_STEP-th frequency, unsmoothed, with the same parameters θ."""
-    freq = model.freq_hz
-    return model.variant(freq_hz=freq[::GRID_STEP], window_weights=None,
-                         shape_edges_hz=(float(freq[0]), float(freq[-1])))
 
 
 def _model_derivative(model: HalfCarSpectrum, theta: np.ndarray, key: str) -> np.ndarray:
