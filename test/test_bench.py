@@ -13,10 +13,10 @@ KEYS = ("sim_100s_at_100hz_ms", "road_generation_ms", "update_120s_window_ms",
 
 
 def test_bench_reports_the_refined_studys_rate_next_to_the_others(monkeypatch):
-    studies: list[tuple[int, str]] = []
+    studies: list[tuple] = []
 
-    def study_rate(repeats: int, method: str = "") -> float:
-        studies.append((repeats, method))
+    def study_rate(repeats: int, method: str = "", amplitudes: str = "fixed", noise: float = 0.0) -> float:
+        studies.append((repeats, method, amplitudes, noise))
         return 10.0 if method else 100.0
 
     monkeypatch.setattr(bench, "_median_ms", lambda fn, repeats: 1.0)
@@ -24,4 +24,4 @@ def test_bench_reports_the_refined_studys_rate_next_to_the_others(monkeypatch):
     out = bench.run_bench(repeats=20)
     assert tuple(out) == KEYS
     assert out["study_trials_per_second"] == 100.0 and out["study_refined_trials_per_second"] == 10.0
-    assert studies == [(2, ""), (1, "likelihood")]
+    assert studies == [(2, "", "fixed", 0.0), (1, "likelihood", "gaussian", 0.1)]  # the refined grid's roads

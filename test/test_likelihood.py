@@ -137,17 +137,17 @@ def test_score_covariance(window, spectra, taper):
         S, dS = model.spectrum(theta)
         u = np.einsum("pkaa->pka", np.tensordot(combos, dS, axes=1)).real / np.einsum("kaa->ka", S).real ** 2
         expected = np.einsum("pka,qkb,kab->pq", u, u, np.abs(S) ** 2)
-        # the sum over frequency by the midpoint rule: 1e-6 of it
-        assert np.allclose(J, expected, rtol=1e-5, atol=1e-5 * np.diag(expected).max())
+        # the sum over frequency by the midpoint rule (0.1 Hz): 1e-3 of it in any direction
+        assert np.allclose(J, expected, rtol=1e-3, atol=1e-3 * np.diag(expected).max())
     elif taper == 0.0:
-        assert np.allclose(J, F, rtol=1e-5, atol=1e-5 * np.diag(F).max())
+        assert np.allclose(J, F, rtol=1e-3, atol=1e-3 * np.diag(F).max())
     else:
         assert np.all((np.diag(J) / np.diag(F) > 1.4) & (np.diag(J) / np.diag(F) < 2.1))
 
 
 def _brute_force_score_covariance(obj, model, theta, combos):
     """Σ_(k,k') Re tr(A_ik C_kk' A_jk' C_k'k) over every pair of bins, C from its definition."""
-    S_ext = model.fine(model.spectrum(theta, derivatives=False, smooth=False)[0])
+    S_ext = model.variant(grid_step=1).spectrum(theta, derivatives=False, smooth=False)[0]
     S, dS = obj.model_at(theta)
     inv = np.linalg.inv(S)
     A = inv[None] @ np.tensordot(combos, dS, axes=1) @ inv[None]
@@ -165,10 +165,11 @@ def _brute_force_score_covariance(obj, model, theta, combos):
     return out
 
 
-@pytest.mark.parametrize(("duration_s", "grid_step", "rtol"), [(20.0, 1, 1e-9), (120.0, 6, 2e-3)])
+@pytest.mark.parametrize(("duration_s", "grid_step", "rtol"),
+                         [(10.0, 1, 1e-9), (20.0, 1, 1e-3), (120.0, 6, 2e-3)])
 def test_score_covariance_equals_the_double_sum_over_bins(duration_s, grid_step, rtol):
-    """The fast score covariance (lags cut at 1 %, the midpoint rule over frequency) equals the
-    double sum over every pair of bins with C from its definition."""
+    """The fast score covariance (the midpoint rule over 0.1 Hz: exact for a 10 s window)
+    equals the double sum over every pair of bins with C from its definition."""
     accel, _ = run(duration_s=duration_s)
     sp = window_spectra(accel, 100.0, (0.5, 15.0), 0.2)
     model = HalfCarSpectrum(Vehicle(), sp.freq_hz, 100.0, SPEED, window_weights=sp.window_weights,

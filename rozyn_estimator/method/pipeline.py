@@ -19,6 +19,7 @@ never a number.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -154,13 +155,19 @@ def estimate(
     # 6 std against wrong basins): the previous window's serves (the windows overlap), and
     # Rozyn's jackknife — most of its stage's time — runs only if the refinement fails.
     carried = _carried_guard_std(warm_start) if cfg.refine != "none" and cfg.variance != "none" else None
-    rozyn = _rozyn_stage(y, fs_hz, vehicle, cfg if carried is None else cfg.replace(variance="none"), speed,
-                         started)
+    stage_cfg = cfg if carried is None else _without_variance(cfg)
+    rozyn = _rozyn_stage(y, fs_hz, vehicle, stage_cfg, speed, started)
     if cfg.refine == "none":
         est = _with_budget(rozyn, vehicle, cfg)
     else:
         est = _refined(rozyn, y, fs_hz, vehicle, cfg, profile, warm_start, started, carried)
     return dataclasses.replace(est, glitches=gated) if any(gated) else est
+
+
+@functools.lru_cache(maxsize=8)
+def _without_variance(cfg: PipelineConfig) -> PipelineConfig:
+    """``cfg`` without Rozyn's jackknife (cached: a config's validation is not free)."""
+    return cfg.replace(variance="none")
 
 
 def _carried_guard_std(warm_start: Estimate | np.ndarray | None) -> np.ndarray | None:

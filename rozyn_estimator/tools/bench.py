@@ -109,7 +109,9 @@ def run_bench(repeats: int = 20) -> dict[str, Any]:
             max(3, repeats // 2)),
         "trial_100s_iso_ms": _median_ms(lambda: _trial(), max(3, repeats // 4)),
         "study_trials_per_second": _study_trials_per_second(max(1, repeats // 10)),
-        "study_refined_trials_per_second": _study_trials_per_second(max(1, repeats // 20), "likelihood"),
+        # the refined study's grid (issue 12): Gaussian roads, 10 % sensor noise
+        "study_refined_trials_per_second": _study_trials_per_second(max(1, repeats // 20), "likelihood",
+                                                                    "gaussian", 0.1),
     }
     out["budget_overhead_pct"] = 100.0 * (
         out["refined_update_warm_ms"] / out["refined_update_warm_without_budget_ms"] - 1.0)
@@ -171,8 +173,9 @@ def _trial() -> None:
     run_trial(TrialSpec(), 1)
 
 
-def _study_trials_per_second(repeats: int, method: str = "") -> float:
+def _study_trials_per_second(repeats: int, method: str = "", amplitudes: str = "fixed",
+                             noise_fraction: float = 0.0) -> float:
     """One core over the thesis grid's mix of measurement times (``rozyn study [--method]``)."""
     from rozyn_estimator.tools.study import bench_trials_per_second
 
-    return bench_trials_per_second(repeats, method)
+    return bench_trials_per_second(repeats, method, amplitudes, noise_fraction)

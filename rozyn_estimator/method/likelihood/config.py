@@ -43,6 +43,9 @@ class LikelihoodConfig:
     max_iter: int = param(100, "optimiser iterations per start", low=1)
     tol: float = param(1e-3, "convergence: Newton decrement below this (ℓ within half of it of the optimum)",
                        low=0.0, open_low=True)
+    tol_calibrated: float = param(0.05, "convergence when the calibration's Newton step follows (it "
+                                  "completes the fit's: measured, the estimates move by < 0.003 std)",
+                                  low=0.0, open_low=True)
     noise_start: float = param(1e-3, "the starts' noise floors, share of each channel's band power",
                                low=0.0, open_low=True, high=1.0)
     block_s: float = param(12.0, "time blocks of the covariance's empirical score variance", unit="s",

@@ -28,7 +28,7 @@ from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
 from rozyn_estimator.method.likelihood.objective import WhittleObjective, inv2, mul2
 
-_NOISE_AT_ZERO = 1e-5  # a noise floor below this share of its channel's band power is zero
+NOISE_AT_ZERO = 1e-5  # a noise floor below this share of its channel's band power is zero
 _INCOHERENCE_AT_ZERO = 1e-6
 
 
@@ -88,7 +88,7 @@ def kept(
     # A noise floor far below its channel's power sits at its boundary (zero): the data
     # hold no information on it, so the fit is conditioned on it.
     keep = np.ones(theta.size, dtype=bool)
-    keep[4:6] = np.exp(theta[4:6]) > _NOISE_AT_ZERO * objective.band_power
+    keep[4:6] = np.exp(theta[4:6]) > NOISE_AT_ZERO * objective.band_power
     if "ln_incoherence" in model.index:
         # Likewise the incoherent share when the data do not resolve it (noise dominates):
         # near its boundary the information's curvature misstates the other parameters'.

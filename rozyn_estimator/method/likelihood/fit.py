@@ -38,9 +38,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import OptimizeResult, minimize
 
+from rozyn_estimator.method.likelihood.augment import plan
 from rozyn_estimator.method.likelihood.calibration import Calibration
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
-from rozyn_estimator.method.likelihood.covariance import CovarianceError, kept
+from rozyn_estimator.method.likelihood.covariance import NOISE_AT_ZERO, CovarianceError, kept
 from rozyn_estimator.method.likelihood.fitcheck import ModelFit, model_fit
 from rozyn_estimator.method.likelihood.model import CORNERS, HalfCarSpectrum
 from rozyn_estimator.method.likelihood.objective import WhittleObjective
@@ -50,6 +51,8 @@ from rozyn_estimator.vehicle import Vehicle
 
 _MIN_NOISE = 1e-9  # the model's fixed white floor, share of each channel's band power
 _GRID_HZ = (0.8, 1.2, 1.8)  # body frequencies of the coarse start grid
+_STALL_ITERATIONS = 10  # iterations without progress that end a fit (see _stalled)
+_STALLED_TOL = 100.0  # a stalled fit counts as converged with its decrement below this many tol
 
 
 @dataclass(frozen=True)
@@ -178,7 +181,10 @@ def _refine(
                             window_weights=spectra.window_weights,
                             grid_step=_bins(cfg.grid_hz, spectra))
     objective = WhittleObjective(model, spectra, cfg.spectra)
-    fits = _Fits(objective, cfg)
+    # A calibration's Newton step of the augmented posterior follows when there are values
+    # to calibrate: it also completes the fit's last bit of convergence.
+    calibrating = cfg.self_calibrate and plan(vehicle, model).any
+    fits = _Fits(objective, cfg, cfg.tol_calibrated if calibrating else cfg.tol)
     given = start if start is not None and _physical(start, L) else None  # a usable start
     warm_theta = None
     if isinstance(warm, Refinement) and warm.theta is not None and warm.theta.size == model.n_params:
@@ -281,15 +287,18 @@ def _check_noise(theta: np.ndarray, objective: WhittleObjective, cfg: Likelihood
 class _Fits:
     """Trust-region Newton fits from several starts; keeps the lowest ℓ."""
 
-    def __init__(self, objective: WhittleObjective, cfg: LikelihoodConfig) -> None:
-        self.objective, self.cfg = objective, cfg
+    def __init__(self, objective: WhittleObjective, cfg: LikelihoodConfig, tol: float) -> None:
+        self.objective, self.cfg, self.tol = objective, cfg, tol
         self.best: OptimizeResult | None = None
         self.iterations = self.starts = 0
         self.converged = False
 
     def run(self, theta0: np.ndarray) -> None:
+        values: list[float] = []
+
         def stop_when_converged(intermediate_result: OptimizeResult) -> None:
-            if self.objective.decrement(intermediate_result.x) < self.cfg.tol:
+            values.append(float(intermediate_result.fun))
+            if self._decrement(intermediate_result.x) < self.tol or _stalled(values, self.tol):
                 raise StopIteration
 
         res = minimize(self.objective.fun, theta0, jac=self.objective.jac, hess=self.objective.hess,
@@ -299,7 +308,24 @@ class _Fits:
         self.starts += 1
         if np.isfinite(res.fun) and (self.best is None or res.fun < self.best.fun):
             self.best = res
-            self.converged = self.objective.decrement(res.x) < self.cfg.tol
+            # stalled within a few tol of the optimum: as good as the quadratic model can say
+            limit = self.tol * (_STALLED_TOL if _stalled(values, self.tol) else 1.0)
+            self.converged = self._decrement(res.x) < limit
+
+    def _decrement(self, theta: np.ndarray) -> float:
+        """The Newton decrement over the parameters not at a boundary: a noise floor run to
+        zero (noise-free data) keeps creeping down without changing anything else."""
+        free = np.ones(theta.size, dtype=bool)
+        free[4:6] = _noise_share(theta, self.objective) > NOISE_AT_ZERO
+        return self.objective.decrement(theta, free)
+
+
+def _stalled(values: list[float], tol: float) -> bool:
+    """ℓ improved by less than a tenth of ``tol`` over the last ten iterations: on a short
+    window the fit can crawl along a flat direction (the Hessian is the Fisher information
+    with a few exact rows, not the observed one) by 1e-5 an iteration while the decrement
+    stays just above ``tol``."""
+    return len(values) > _STALL_ITERATIONS and values[-1 - _STALL_ITERATIONS] - values[-1] < 0.1 * tol
 
 
 def _agrees(params: np.ndarray, start: np.ndarray | None, start_std: np.ndarray | None) -> bool:

@@ -73,13 +73,11 @@ class HalfCarSpectrum:
         calibrate_gain, calibrate_time_offset: θ also holds the rear sensor's gain relative
             to the front one (``ln_rear_gain``) and its delay behind the front one
             (``time_offset_ms``): the sensors' self-calibration.
-        shape_edges_hz: the band whose ends the road shape's polynomials span (default:
-            the grid's ends; a coarser grid of the same band passes the band's).
+        shape_edges_hz: the band the road shape's polynomials span (default: the grid's).
         min_noise_psd: (front, rear) white floor added to the fitted noise [(m/s²)²/Hz]:
-            keeps S positive definite when the data are noise-free (θ's noise floor then
-            runs to zero and stops mattering).
-        grid_step: the model is evaluated on every ``grid_step``-th bin and interpolated
-            (:mod:`.grid`; 1: on every bin).
+            keeps S positive definite when the data are noise-free.
+        grid_step: the model is evaluated every ``grid_step`` bins and interpolated
+            (:mod:`.grid`; the taper's smoothing is applied there too).
     """
 
     def __init__(
@@ -101,8 +99,8 @@ class HalfCarSpectrum:
             shape_edges_hz=shape_edges_hz, corner_terms=corner_terms, sensor_positions=sensor_positions,
             grid_step=grid_step,
         )
-        # A tapered periodogram's expectation is S smoothed by the taper's spectral window:
-        # the model runs on the grid extended by J Fourier bins each side (above 0 Hz).
+        # A tapered periodogram's expectation is S smoothed by the taper's spectral window: the model
+        # runs on the grid extended by J Fourier bins each side (above 0 Hz)
         c = np.ones(1) if window_weights is None else np.asarray(window_weights, dtype=float)
         half = (c.size - 1) // 2
         df = freq_hz[1] - freq_hz[0] if freq_hz.size > 1 else 1.0
@@ -111,11 +109,10 @@ class HalfCarSpectrum:
             c = c[half - room: half + room + 1]
             half = room
         self.kernel = c / c.sum()
-        self.half = half
-        self.n_ext = freq_hz.size + 2 * half
-        self.n_freq = freq_hz.size
+        self.half, self.n_ext, self.n_freq = half, freq_hz.size + 2 * half, freq_hz.size
         # the grid the model is evaluated on: every grid_step-th bin of the extended grid
         self.reduction: Reduction = reduction(freq_hz.size, self.kernel, grid_step)
+        self._fine: HalfCarSpectrum | None = None  # the model at every bin (fine_spectrum)
         self.n_eval = self.reduction.nodes.size
         grid = freq_hz[0] + df * (self.reduction.nodes - half) if half or grid_step > 1 else freq_hz
         shifts = np.arange(-aliases, aliases + 1)[:, None] * fs_hz
@@ -319,10 +316,10 @@ class HalfCarSpectrum:
                 gc[1] *= rear
         rank = self._outer_sum(g, g, weight)
         if smooth:
-            rank = self._smooth(rank)
+            rank = self.reduction.bins(rank)
         k_inc = self.index.get("ln_incoherence")
         incoherence = np.exp(theta[k_inc]) if k_inc is not None else 0.0
-        S_road = rank + incoherence * self._diagonal(rank)
+        S_road = rank + incoherence * self._diagonal(rank) if k_inc is not None else rank
         noise = np.exp(theta[4:6])
         S = S_road.copy()
         S[:, 0, 0] += noise[0] + self.min_noise_psd[0]
@@ -363,9 +360,12 @@ class HalfCarSpectrum:
         at = {name: i for i, name in enumerate(out)}
         dS = np.zeros((len(out), self.n_freq, 2, 2), dtype=complex)
         if road:
-            smoothed = self._smooth(np.stack(list(road.values())))
-            dS[[at[name] for name in road]] = smoothed + incoherence * self._diagonal(smoothed)
-        special = {"ln_road": S_road, "ln_incoherence": incoherence * self._diagonal(rank)}
+            smoothed = self.reduction.bins(np.stack(list(road.values())))
+            dS[[at[name] for name in road]] = (smoothed + incoherence * self._diagonal(smoothed)
+                                               if k_inc is not None else smoothed)
+        special = {"ln_road": S_road}
+        if k_inc is not None:
+            special["ln_incoherence"] = incoherence * self._diagonal(rank)
         for name, value in special.items():
             if name in at:
                 dS[at[name]] = value
@@ -386,15 +386,15 @@ class HalfCarSpectrum:
             factor = delay if factor is None else factor * delay
         return None if factor is None else np.broadcast_to(factor, self.omega.shape)
 
-    def fine(self, m: np.ndarray) -> np.ndarray:
-        """Unsmoothed spectra on the evaluation grid (..., n_eval, 2, 2) -> the extended grid
-        of the band's bins (..., k + 2J, 2, 2)."""
-        return self.reduction.fine(m)
-
-    def _smooth(self, m: np.ndarray) -> np.ndarray:
-        """The taper's spectral window applied along frequency (and the interpolation from
-        the evaluation grid): (..., n_eval, 2, 2) -> (..., k, 2, 2) at the band's bins."""
-        return self.reduction.bins(m)
+    def fine_spectrum(self, theta: np.ndarray) -> np.ndarray:
+        """S at every bin of the extended grid (k + 2J, 2, 2), unsmoothed, not interpolated
+        (nearly noise-free, S is nearly singular: an interpolation's error could make it indefinite)."""
+        if self.reduction.step == 1:
+            return self.spectrum(theta, derivatives=False, smooth=False)[0]
+        if self._fine is None:
+            self._fine = self.variant(grid_step=1)
+        self._fine.rear_factor = self.rear_factor
+        return self._fine.spectrum(theta, derivatives=False, smooth=False)[0]
 
     @staticmethod
     def _diagonal(m: np.ndarray) -> np.ndarray:

@@ -30,8 +30,8 @@ from rozyn_estimator.method.likelihood.spectra import Spectra, band_power
 
 _NEAR = 10.0  # Newton decrement below which the optimiser uses the sharper Hessian
 # The score covariance's sum over frequency takes one bin in this width (the midpoint rule on
-# a smooth summand: 1e-6 of the covariance at 120 s, 1e-5 at 20 s)
-_SUM_STEP_HZ = 0.05
+# a smooth summand: measured, within 1e-4 of the covariance at 30-120 s)
+_SUM_STEP_HZ = 0.1
 
 
 def inv2(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -47,8 +47,15 @@ def inv2(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def mul2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Products of stacked 2x2 matrices (..., 2, 2), broadcast: numpy's ``@`` loops over the
-    stack one tiny matrix at a time, this is four vectorised multiply-adds (5-10x faster)."""
-    return a[..., :, 0, None] * b[..., None, 0, :] + a[..., :, 1, None] * b[..., None, 1, :]
+    stack one tiny matrix at a time, this is the four entries' vectorised sums (2-3x faster)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape), dtype=np.result_type(a, b))
+    a00, a01, a10, a11 = a[..., 0, 0], a[..., 0, 1], a[..., 1, 0], a[..., 1, 1]
+    b00, b01, b10, b11 = b[..., 0, 0], b[..., 0, 1], b[..., 1, 0], b[..., 1, 1]
+    out[..., 0, 0] = a00 * b00 + a01 * b10
+    out[..., 0, 1] = a00 * b01 + a01 * b11
+    out[..., 1, 0] = a10 * b00 + a11 * b10
+    out[..., 1, 1] = a10 * b01 + a11 * b11
+    return out
 
 
 def whitened(S: np.ndarray, dS: np.ndarray) -> np.ndarray:
@@ -62,16 +69,18 @@ def whitened(S: np.ndarray, dS: np.ndarray) -> np.ndarray:
     large product.
     """
     l11 = np.sqrt(S[:, 0, 0].real)
-    l21 = S[:, 1, 0] / l11
-    l22 = np.sqrt(S[:, 1, 1].real - np.abs(l21) ** 2)
+    g = S[:, 1, 0] / S[:, 0, 0].real  # l21 / l11
+    l22 = np.sqrt(S[:, 1, 1].real - np.abs(g) ** 2 * S[:, 0, 0].real)
     a, b, d = dS[:, :, 0, 0].real, dS[:, :, 1, 0], dS[:, :, 1, 1].real  # ∂S's three numbers
-    # W = L⁻¹ ∂S L⁻ᴴ with L⁻¹ = [[1/l11, 0], [-l21/(l11 l22), 1/l22]]
-    w11 = a / l11**2
-    w21 = (b - l21 * a / l11) / (l11 * l22)
-    w22 = (d - 2.0 * (np.conj(l21) * b).real / l11 + np.abs(l21) ** 2 * a / l11**2) / l22**2
-    p = dS.shape[0]
+    # W = L⁻¹ ∂S L⁻ᴴ with L⁻¹ = [[1/l11, 0], [-l21/(l11 l22), 1/l22]]; per-bin factors once
+    p, k = a.shape
+    out = np.empty((p, 4, k))
     root2 = math.sqrt(2.0)
-    return np.concatenate([w11, w22, root2 * w21.real, root2 * w21.imag], axis=1).reshape(p, -1)
+    np.multiply(a, 1.0 / S[:, 0, 0].real, out=out[:, 0])  # w11
+    w21 = (b - g * a) * (root2 / (l11 * l22))
+    out[:, 1] = (d - 2.0 * (np.conj(g) * b).real + np.abs(g) ** 2 * a) * (1.0 / l22**2)  # w22
+    out[:, 2], out[:, 3] = w21.real, w21.imag  # √2 w21
+    return out.reshape(p, -1)
 
 
 def _exact_rows(
@@ -244,10 +253,14 @@ class WhittleObjective:
                 self._hess = hess
         return self._hess
 
-    def decrement(self, theta: np.ndarray) -> float:
-        """Newton decrement gᵀF⁻¹g: twice the ℓ a scoring step would still gain."""
+    def decrement(self, theta: np.ndarray, free: np.ndarray | None = None) -> float:
+        """Newton decrement gᵀF⁻¹g: twice the ℓ a scoring step would still gain (over the
+        ``free`` parameters only, when given: the others held where they are)."""
         _, grad = self.evaluate(theta)
-        return float(grad @ np.linalg.solve(_ridged(self.fisher(theta)), grad))
+        info = _ridged(self.fisher(theta))
+        if free is not None:
+            grad, info = grad[free], info[np.ix_(free, free)]
+        return float(grad @ np.linalg.solve(info, grad))
 
     def hess(self, theta: np.ndarray) -> np.ndarray:
         """The optimiser's Hessian, with a tiny ridge so that a direction the data say
@@ -276,7 +289,7 @@ class WhittleObjective:
             combos: (q, n_params) linear combinations of the score wanted.
         """
         model = self.model
-        S_ext = model.fine(model.spectrum(theta, derivatives=False, smooth=False)[0])
+        S_ext = model.fine_spectrum(theta)
         S, dS = self.model_at(theta)
         inv = inv2(S)[0]
         A = mul2(mul2(inv, np.tensordot(combos, dS, axes=1)), inv)  # (q, k, 2, 2)
@@ -345,8 +358,10 @@ def _score_covariance(A: np.ndarray, S_ext: np.ndarray, w_hat: np.ndarray, step:
     h = _hermitian_numbers(A)  # (q, k, 4)
     g = np.einsum("dkxy,iky->idkx", _congruence(C), h[:, bins])  # (q, n_δ, kc, 4)
     partner = bins[None, :] + lags[:, None]
-    inside = (partner >= 0) & (partner < k)
-    weight = counts[None, :] * inside  # (n_δ, kc)
+    # the bins of each block whose partner k + δ lies in the band, counted exactly (the
+    # band's edges are where the summand is not smooth)
+    ends = np.minimum(starts + counts, k - lags[:, None])
+    weight = np.maximum(0, ends - np.maximum(starts, -lags[:, None]))  # (n_δ, kc)
     other = h[:, np.clip(partner, 0, k - 1)] * weight[None, :, :, None]  # (q, n_δ, kc, 4)
     out = g.reshape(q, -1) @ other.reshape(q, -1).T
     return 0.5 * (out + out.T)

@@ -80,6 +80,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     grid.add_argument("--laplace-nu", type=float, metavar="NU", help="Laplace road variance nu (default: 1)")
     grid.add_argument("--rate-hz", type=float, metavar="HZ", help="accelerometer rate (default: 100)")
     grid.add_argument("--noise-std-mps2", type=float, metavar="MPS2", help="white sensor noise (default: 0)")
+    grid.add_argument("--noise-fraction", type=float, metavar="SHARE",
+                      help="white sensor noise as a share of each channel's rms, e.g. 0.1 (default: 0)")
     grid.add_argument("--method", choices=tuple(METHODS), metavar="NAME",
                       help=f"estimation method: {', '.join(METHODS)} (default: {default_method()}, "
                            "Rozyn's pipeline without refinement)")
@@ -109,7 +111,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 _SETTING_ARGS = ("roads", "speeds_kmh", "durations_s", "trials", "amplitudes", "road_class", "laplace_nu",
-                 "rate_hz", "noise_std_mps2", "method", "seed_base", "vehicle")
+                 "rate_hz", "noise_std_mps2", "noise_fraction", "method", "seed_base", "vehicle")
 
 
 def settings_from_args(args: argparse.Namespace, base: StudySettings | None = None) -> StudySettings:

@@ -69,6 +69,8 @@ class StudySettings:
     laplace_nu: float = param(1.0, "Laplace road: variance of the section gamma variable")
     rate_hz: float = param(100.0, "accelerometer rate", unit="Hz")
     noise_std_mps2: float = param(0.0, "white sensor noise", unit="m/s^2")
+    noise_fraction: float = param(0.0, "white sensor noise as a share of each channel's rms (0.1: 10 %)",
+                                  low=0.0)
     method: str = param("", "estimation method; empty: default_method()", choices=tuple(METHODS))
     seed_base: int = param(0, "changes every road seed", low=0)
     vehicle: Vehicle = param(description="the vehicle", default_factory=Vehicle)
@@ -98,17 +100,20 @@ class StudySettings:
         return len(self.roads) * len(self.speeds_kmh) * len(self.durations_s) * self.trials
 
     def pipeline_config(self) -> PipelineConfig:
-        """The method's settings without the per-trial covariance (the study is the spread)."""
+        """The method's settings; Rozyn's pipeline without its jackknife covariance (the study
+        is the spread), a refined method as shipped (the jackknife's std scales the
+        refinement's guard against wrong basins: without it every trial runs a second start)."""
         cfg = METHODS[self.method]
         if self.method == default_method():
             cfg = _without_refinement(cfg)
-        return cfg.replace(variance="none")
+        return cfg if getattr(cfg, "refine", "none") != "none" else cfg.replace(variance="none")
 
     def trial_spec(self, cell: Cell) -> TrialSpec:
         return TrialSpec(
             road=cell.road, road_class=self.road_class, amplitudes=self.amplitudes,
             laplace_nu=self.laplace_nu, speed_kmh=cell.speed_kmh, duration_s=cell.duration_s,
-            rate_hz=self.rate_hz, noise_std_mps2=self.noise_std_mps2, vehicle=self.vehicle,
+            rate_hz=self.rate_hz, noise_std_mps2=self.noise_std_mps2, noise_fraction=self.noise_fraction,
+            vehicle=self.vehicle,
             method=self.method, pipeline=self.pipeline_config(),
         )
 

@@ -105,6 +105,8 @@ def _honesty(
 def study_title(settings: StudySettings) -> str:
     """The title of ``summary.md``: the road, the method and the trials per cell."""
     noise = f", sensor noise {settings.noise_std_mps2:g} m/s²" if settings.noise_std_mps2 else ""
+    if settings.noise_fraction:
+        noise += f", sensor noise {settings.noise_fraction:.0%} of each channel's rms"
     return (f"Study: ISO 8608 class {settings.road_class} base road, {settings.amplitudes} amplitudes"
             f"{noise}, method {settings.method}, {settings.trials} trials per cell")
 

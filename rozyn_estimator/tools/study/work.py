@@ -244,14 +244,17 @@ def _progress(total: int, initial: int, enabled: bool) -> Any:
                 dynamic_ncols=True, smoothing=0.05, desc="study", leave=False)
 
 
-def bench_trials_per_second(repeats: int = 1, method: str = "") -> float:
+def bench_trials_per_second(repeats: int = 1, method: str = "", amplitudes: str = "fixed",
+                            noise_fraction: float = 0.0) -> float:
     """Trials per second on one core over a spread of the thesis grid (``rozyn bench``).
 
     One trial per (road, duration) at 60 km/h, durations 10 to 120 s: the mix of a full
     study, with ``method`` (default: the study's, Rozyn's pipeline; ``likelihood``: the
-    refined estimator). Multiply by the cores for a study's rate.
+    refined estimator), on roads of ``amplitudes`` with relative sensor noise
+    ``noise_fraction``. Multiply by the cores for a study's rate.
     """
-    settings = StudySettings(speeds_kmh=(60.0,), trials=1, method=method)
+    settings = StudySettings(speeds_kmh=(60.0,), trials=1, method=method, amplitudes=amplitudes,
+                             noise_fraction=noise_fraction)
     chunks = plan_chunks(settings, set(), 1)
     run_chunk(chunks[0])  # warm-up
     started = time.perf_counter()
