@@ -65,7 +65,7 @@ class Estimate:
     refinement: Refinement | None = None
     budget: Budget | None = None  # the covariance's statistical and systematic parts
     glitches: tuple[int, ...] = (0, 0)  # samples gated as glitches (front, rear): method/glitches.py
-    guard_std: np.ndarray | None = None  # (3,) Rozyn's std the refinement's guard used (see estimate)
+    guard_std: np.ndarray | None = None  # (3,) Rozyn's std the refinement's guard had (carried on)
 
     @property
     def ok(self) -> bool:
@@ -151,16 +151,10 @@ def estimate(
         y, gated = _checked(accel, fs_hz, cfg)
     except InputError as exc:
         return _failed(str(exc), int(accel.shape[0]) if accel.ndim >= 1 else 0, started)
-    # A warm refined update needs Rozyn's std only for the refinement's guard (a scale of
-    # 6 std against wrong basins): the previous window's serves (the windows overlap), and
-    # Rozyn's jackknife — most of its stage's time — runs only if the refinement fails.
-    carried = _carried_guard_std(warm_start) if cfg.refine != "none" and cfg.variance != "none" else None
-    stage_cfg = cfg if carried is None else _without_variance(cfg)
-    rozyn = _rozyn_stage(y, fs_hz, vehicle, stage_cfg, speed, started)
     if cfg.refine == "none":
-        est = _with_budget(rozyn, vehicle, cfg)
+        est = _with_budget(_rozyn_stage(y, fs_hz, vehicle, cfg, speed, started), vehicle, cfg)
     else:
-        est = _refined(rozyn, y, fs_hz, vehicle, cfg, profile, warm_start, started, carried)
+        est = _refined(y, fs_hz, vehicle, cfg, speed, profile, warm_start, started)
     return dataclasses.replace(est, glitches=gated) if any(gated) else est
 
 
@@ -171,13 +165,11 @@ def _without_variance(cfg: PipelineConfig) -> PipelineConfig:
 
 
 def _carried_guard_std(warm_start: Estimate | np.ndarray | None) -> np.ndarray | None:
-    """The previous refined update's guard std, when it had a successful refinement."""
-    previous = warm_start.refinement if isinstance(warm_start, Estimate) else None
-    if previous is None or not previous.ok:
+    """The previous refined update's guard std (the windows overlap: it serves this one's)."""
+    if not isinstance(warm_start, Estimate) or warm_start.guard_std is None:
         return None
-    assert isinstance(warm_start, Estimate)
     std = warm_start.guard_std
-    return std if std is not None and np.all(np.isfinite(std)) else None
+    return std if np.all(np.isfinite(std)) else None
 
 
 def _speed(speed_mps: float | np.ndarray | None) -> tuple[float | None, float | np.ndarray | None]:
@@ -237,22 +229,36 @@ def _failed(reason: str, n: int, started: float, **extra: Any) -> Estimate:
 
 
 def _refined(
-    rozyn: Estimate, y: np.ndarray, fs_hz: float, vehicle: Vehicle, cfg: PipelineConfig,
+    y: np.ndarray, fs_hz: float, vehicle: Vehicle, cfg: PipelineConfig, speed_mps: float | None,
     speed: float | np.ndarray | None, warm_start: Estimate | np.ndarray | None, started: float,
-    carried: np.ndarray | None = None,
 ) -> Estimate:
-    """The likelihood refinement after Rozyn's stage, with its fallbacks (``carried``: the
-    guard's std from the previous window, Rozyn's stage then ran without its variance)."""
-    n = rozyn.n_samples
+    """The likelihood refinement after Rozyn's stage, with its fallbacks.
+
+    Rozyn's estimate starts the fit. Its jackknife covariance — most of its stage's time —
+    is needed only by the refinement's guard, when the fit disagrees with Rozyn's estimate
+    by more than 25 % (:func:`refine`; a warm update carries the previous window's std
+    instead), and by the fallback when the refinement fails: it is computed then
+    (``Estimate.rozyn`` has no covariance otherwise).
+    """
+    quick = _rozyn_stage(y, fs_hz, vehicle, _without_variance(cfg), speed_mps, started)
+    full: list[Estimate] = []
+    carried = _carried_guard_std(warm_start)  # a warm update: the previous window's guard std serves
+
+    def with_variance() -> Estimate:
+        if not full:
+            jackknife = cfg.variance != "none"
+            full.append(_rozyn_stage(y, fs_hz, vehicle, cfg, speed_mps, started) if jackknife else quick)
+        return full[0]
+
+    n = quick.n_samples
     warm = _warm(warm_start)
-    guard_std = rozyn.statistical_std if carried is None else carried
     if speed is None:
         ref = Refinement(status="failed", reason="the speed is unknown (it sets the wheelbase delay)")
     else:
-        ref = refine(y, fs_hz, vehicle, rozyn.params, speed, cfg.likelihood, warm=warm, start_std=guard_std)
-    if not ref.ok and carried is not None:  # the fallback publishes Rozyn's estimate: with its variance
-        mean = None if speed is None else float(np.mean(speed))
-        rozyn = _rozyn_stage(y, fs_hz, vehicle, cfg, mean, started)
+        ref = refine(y, fs_hz, vehicle, quick.params, speed, cfg.likelihood, warm=warm,
+                     start_std=carried if carried is not None else lambda: with_variance().statistical_std)
+    rozyn = with_variance() if full or not ref.ok else quick
+    guard_std = carried if carried is not None else (rozyn.statistical_std if full else None)
     elapsed = (time.perf_counter() - started) * 1e3
     if ref.ok:
         origin = "the previous estimate" if warm is not None else "a coarse grid"

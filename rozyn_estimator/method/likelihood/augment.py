@@ -30,7 +30,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import minimize
+from scipy.optimize import OptimizeResult, minimize
 
 from rozyn_estimator.method.likelihood.calibration import CALIBRATED
 from rozyn_estimator.method.likelihood.calibration import POSITION_KEYS as POSITIONS
@@ -111,8 +111,13 @@ def calibrate(objective: WhittleObjective, model: HalfCarSpectrum, theta: np.nda
         return Augmented(augmented, aug, start, start + step, stds)
     # Far off (a sensor 5 ms late): the nuisances that absorbed the departure move back, a
     # noise floor from its boundary among them; the fit's trust-region optimiser finds the mode.
+    def stop_at_the_mode(intermediate_result: OptimizeResult) -> None:
+        if augmented.decrement(intermediate_result.x) < _CONVERGED:
+            raise StopIteration
+
     found = minimize(augmented.fun, _backtracked(augmented, start, step, value), jac=augmented.jac,
-                     hess=augmented.hess, method="trust-exact", options={"gtol": 1e-12, "maxiter": max_iter})
+                     hess=augmented.hess, method="trust-exact", callback=stop_at_the_mode,
+                     options={"gtol": 1e-12, "maxiter": max_iter})
     converged = bool(found.success) or augmented.decrement(found.x) < _CONVERGED
     return Augmented(augmented, aug, found.x, found.x, stds, converged=converged)
 

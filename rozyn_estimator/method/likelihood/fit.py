@@ -21,11 +21,11 @@ uses the auto-spectra only (for comparison).
 Starts and the guard against wrong basins (a basin that explains one channel as noise
 exists): cold, the fit runs from the given start (Rozyn's estimate), and from the best
 point of a coarse grid of body frequencies and CoG positions too when the result
-disagrees with the start by more than 6 of its standard deviations or explains a channel
-as mostly noise (without a usable start, from the grid's two best points); warm, from
-the previous window's optimum, and from the given start too when the result disagrees
-with it by more than 6 of its standard deviations. The lower ℓ wins; a result that still
-explains a channel as mostly noise is refused.
+disagrees with the start (by more than 25 % and 6 of its standard deviations: Rozyn's are
+at times optimistic, and a wrong basin lies much further away) or explains a channel as
+mostly noise (without a usable start, from the grid's two best points); warm, from the
+previous window's optimum, and from the given start too when the result disagrees with
+it. The lower ℓ wins; a result that still explains a channel as mostly noise is refused.
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -49,8 +50,10 @@ from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, windo
 from rozyn_estimator.method.likelihood.uncertainty import uncertainty
 from rozyn_estimator.vehicle import Vehicle
 
+StartStd = np.ndarray | Callable[[], np.ndarray | None] | None
 _MIN_NOISE = 1e-9  # the model's fixed white floor, share of each channel's band power
 _GRID_HZ = (0.8, 1.2, 1.8)  # body frequencies of the coarse start grid
+_CLOSE = 0.25  # the guard: a result this close to the start (share of it) agrees whatever its std
 _STALL_ITERATIONS = 10  # iterations without progress that end a fit (see _stalled)
 _STALLED_TOL = 100.0  # a stalled fit counts as converged with its decrement below this many tol
 
@@ -109,15 +112,14 @@ def refine(
     speed_mps: float | np.ndarray,
     config: LikelihoodConfig | None = None,
     warm: Refinement | np.ndarray | None = None,
-    start_std: np.ndarray | None = None,
+    start_std: StartStd = None,
 ) -> Refinement:
     """Maximum-likelihood (m, I, lf) from a window, started from ``start``.
 
     Cold (no ``warm``), the fit runs from ``start``, and from the best point of a coarse
-    grid as well if the result disagrees with it by more than 6 ``start_std`` (or explains
-    a channel as noise), and keeps the lower ℓ. Warm, it runs from the previous optimum,
-    and from ``start`` as well only if the result disagrees with it by more than 6
-    ``start_std``.
+    grid as well if the result disagrees with it by more than 25 % and 6 ``start_std`` (or
+    explains a channel as noise), and keeps the lower ℓ. Warm, it runs from the previous
+    optimum, and from ``start`` as well only if the result disagrees with it so.
 
     Args:
         accel_mps2: (n, 2) front/rear vertical accelerations on a uniform grid, finite.
@@ -129,7 +131,8 @@ def refine(
         config: settings.
         warm: the previous window's refinement (its full θ, nuisance parameters
             included, is the first start) or its (m, I, lf).
-        start_std: (3,) standard deviations of ``start`` (the warm path's guard).
+        start_std: (3,) standard deviations of ``start`` (the guard), or a function that
+            computes them (called only when the fit disagrees with ``start`` by over 25 %).
 
     Returns:
         A :class:`Refinement`, ``failed`` with a reason when no optimum is credible.
@@ -158,7 +161,7 @@ class _FitError(Exception):
 
 
 def _refine(
-    y: np.ndarray, fs: float, vehicle: Vehicle, start: np.ndarray | None, start_std: np.ndarray | None,
+    y: np.ndarray, fs: float, vehicle: Vehicle, start: np.ndarray | None, start_std: StartStd,
     speed: float | np.ndarray, cfg: LikelihoodConfig, warm: Refinement | np.ndarray | None,
 ) -> Refinement:
     band = (cfg.band_hz[0], min(cfg.band_hz[1], cfg.max_band_nyquist * fs / 2.0))
@@ -193,8 +196,7 @@ def _refine(
         warm_theta = _start_theta(model, spectra, warm, cfg.noise_start)
     if warm_theta is not None:
         # Warm: the previous optimum. The guard (the given start, or the grid's best) runs
-        # only when the result disagrees with the start beyond 6 of its standard deviations
-        # (Rozyn's are at times optimistic: a wrong basin lies much further away).
+        # only when the result disagrees with the start.
         fits.run(warm_theta)
         first = fits.best  # None: no finite likelihood, which agrees with nothing
         if cfg.second_start and (first is None or not _agrees(model.physical(first.x), start, start_std)):
@@ -301,16 +303,20 @@ class _Fits:
             if self._decrement(intermediate_result.x) < self.tol or _stalled(values, self.tol):
                 raise StopIteration
 
-        res = minimize(self.objective.fun, theta0, jac=self.objective.jac, hess=self.objective.hess,
-                       method="trust-exact", callback=stop_when_converged,
-                       options={"gtol": 1e-12, "maxiter": self.cfg.max_iter})
-        self.iterations += int(res.nit)
-        self.starts += 1
-        if np.isfinite(res.fun) and (self.best is None or res.fun < self.best.fun):
-            self.best = res
-            # stalled within a few tol of the optimum: as good as the quadratic model can say
-            limit = self.tol * (_STALLED_TOL if _stalled(values, self.tol) else 1.0)
-            self.converged = self._decrement(res.x) < limit
+        self.objective.fast = True  # the iterations' derivatives at the model's nodes
+        try:
+            res = minimize(self.objective.fun, theta0, jac=self.objective.jac, hess=self.objective.hess,
+                           method="trust-exact", callback=stop_when_converged,
+                           options={"gtol": 1e-12, "maxiter": self.cfg.max_iter})
+            self.iterations += int(res.nit)
+            self.starts += 1
+            if np.isfinite(res.fun) and (self.best is None or res.fun < self.best.fun):
+                self.best = res
+                # stalled within a few tol of the optimum: as good as the quadratic model can say
+                limit = self.tol * (_STALLED_TOL if _stalled(values, self.tol) else 1.0)
+                self.converged = self._decrement(res.x) < limit
+        finally:
+            self.objective.fast = False
 
     def _decrement(self, theta: np.ndarray) -> float:
         """The Newton decrement over the parameters not at a boundary: a noise floor run to
@@ -328,11 +334,19 @@ def _stalled(values: list[float], tol: float) -> bool:
     return len(values) > _STALL_ITERATIONS and values[-1 - _STALL_ITERATIONS] - values[-1] < 0.1 * tol
 
 
-def _agrees(params: np.ndarray, start: np.ndarray | None, start_std: np.ndarray | None) -> bool:
-    """``params`` within 6 standard deviations of the start in every parameter."""
-    if start is None or start_std is None or not np.all(np.isfinite(start_std)):
+def _agrees(params: np.ndarray, start: np.ndarray | None, start_std: StartStd) -> bool:
+    """``params`` within 25 % of the start, or within 6 of its standard deviations, in
+    every parameter (``start_std`` is asked for only when 25 % does not settle it)."""
+    if start is None:
         return False
-    return bool(np.all(np.abs(params - start) <= 6.0 * start_std))
+    off = np.abs(params - start)
+    close = off <= _CLOSE * np.abs(start)
+    if np.all(close):
+        return True
+    std = start_std() if callable(start_std) else start_std
+    if std is None or not np.all(np.isfinite(std)):
+        return False
+    return bool(np.all(close | (off <= 6.0 * std)))
 
 
 def _physical(params: np.ndarray, wheelbase_m: float) -> bool:

@@ -38,12 +38,19 @@ class Reduction:
     step: int  # bins between nodes
     to_bins: sparse.csr_array  # (k, n_eval): interpolation and the taper's smoothing
 
+    to_nodes: sparse.csr_array  # (n_eval, k): the map's transpose (its adjoint)
+
     def bins(self, m: np.ndarray) -> np.ndarray:
         """Stacked (..., n_eval, 2, 2) on the evaluation grid -> the band's bins (..., k, 2, 2)."""
-        return _apply(self.to_bins, m)
+        return map_bins(self.to_bins, m)
+
+    def adjoint(self, m: np.ndarray) -> np.ndarray:
+        """Stacked (..., k, 2, 2) at the bins -> the nodes, by the map's transpose: for a
+        gradient, ``Σ_k tr(bins(∂S)_k W_k) = Σ_m tr(∂S_m adjoint(W)_m)``."""
+        return map_bins(self.to_nodes, m)
 
 
-def _apply(op: sparse.csr_array, m: np.ndarray) -> np.ndarray:
+def map_bins(op: sparse.csr_array, m: np.ndarray) -> np.ndarray:
     """``op`` along the frequency axis (-3) of stacked 2x2 matrices; complex values as pairs
     of reals (the real map on twice the columns: half the work of scipy's complex product)."""
     moved = np.ascontiguousarray(np.moveaxis(m, -3, 0))
@@ -58,7 +65,7 @@ def reduction(n_bins: int, kernel: np.ndarray, step: int) -> Reduction:
     return _reduction(n_bins, tuple(np.asarray(kernel, dtype=float).tolist()), int(step))
 
 
-@lru_cache(maxsize=16)
+@lru_cache(maxsize=64)
 def _reduction(n_bins: int, kernel: tuple[float, ...], step: int) -> Reduction:
     """Cached by window geometry: consecutive windows of a run share it."""
     taps = np.asarray(kernel)
@@ -71,7 +78,7 @@ def _reduction(n_bins: int, kernel: tuple[float, ...], step: int) -> Reduction:
     smooth = sparse.csr_array((np.tile(taps, n_bins), (rows, cols)), shape=(n_bins, n_ext))
     to_bins = sparse.csr_array(smooth @ to_fine)
     to_bins.eliminate_zeros()
-    return Reduction(nodes, step, to_bins)
+    return Reduction(nodes, step, to_bins, sparse.csr_array(to_bins.T))
 
 
 def _lagrange(n_fine: int, step: int, n_nodes: int, points: int = 8) -> sparse.csr_array:

@@ -250,11 +250,10 @@ class HalfCarSpectrum:
         """S (k, 2, 2) and, if asked, dS/dθ (n_params, k, 2, 2) (None when not asked); with
         ``rows`` only the derivatives by those parameters, in that order.
 
-        ``smooth=False``: S on the evaluation grid, without the taper's smoothing (no
-        derivatives; :meth:`fine` takes it to the extended grid). Where θ is so far from any
-        vehicle that a value overflows, S and dS are NaN: every likelihood reads that as
-        impossible (the one guard for optimiser steps, warm starts and calibration steps
-        that wander off).
+        ``smooth=False``: S and dS at the evaluation grid's nodes (``reduction.bins`` takes
+        them to the bins). Where θ is so far from any vehicle that a value overflows, S and
+        dS are NaN: every likelihood reads that as impossible (the one guard for optimiser
+        steps, warm starts and calibration steps that wander off).
         """
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             S, dS = self._spectrum(theta, derivatives, smooth, rows)
@@ -314,7 +313,8 @@ class HalfCarSpectrum:
             Q[1] *= rear
             for gc in g:
                 gc[1] *= rear
-        rank = self._outer_sum(g, g, weight)
+        gg = sum(np.einsum("af,bf->fab", gc, gc.conj()) for gc in g)  # Σ_c g_c g_cᴴ, (F, 2, 2)
+        rank = self._fold(gg, weight)
         if smooth:
             rank = self.reduction.bins(rank)
         k_inc = self.index.get("ln_incoherence")
@@ -324,7 +324,7 @@ class HalfCarSpectrum:
         S = S_road.copy()
         S[:, 0, 0] += noise[0] + self.min_noise_psd[0]
         S[:, 1, 1] += noise[1] + self.min_noise_psd[1]
-        if not (derivatives and smooth):
+        if not derivatives:
             return S, None
         want = set(self.names if rows is None else rows)
         road: dict[str, np.ndarray] = {}  # ∂(rank part) on the extended grid, in θ's order
@@ -333,10 +333,10 @@ class HalfCarSpectrum:
                 dg = [w2 * np.einsum("abf,bf->af", Q, d_mass[j] @ xc) for xc in x]
                 road[name] = self._hermitian_part(self._outer_sum(dg, g, weight))
         if self.estimate_waviness and "waviness" in want:
-            road["waviness"] = self._outer_sum(g, g, -weight * self.log_shape)
+            road["waviness"] = self._fold(gg, -weight * self.log_shape)
         for name, basis in zip(self.names[self.shape_slice], self.shape_basis, strict=True):
             if name in want:
-                road[name] = self._outer_sum(g, g, weight * basis)
+                road[name] = self._fold(gg, weight * basis)
         corner_rows = [(q, k) for q in self.corner_terms for k in range(2) if f"ln_{q}_{CORNERS[k]}" in want]
         if corner_rows:  # the corner values' rows, as one stack (likelihood/corners.py)
             state = CornerState(ks, cs, kt, ct, mt, zs, zt, wt, den)
@@ -358,9 +358,10 @@ class HalfCarSpectrum:
             road["time_offset_ms"] = self._hermitian_part(self._outer_sum(dg, g, weight))
         out = list(self.names) if rows is None else list(rows)
         at = {name: i for i, name in enumerate(out)}
-        dS = np.zeros((len(out), self.n_freq, 2, 2), dtype=complex)
+        dS = np.zeros((len(out), self.n_freq if smooth else self.n_eval, 2, 2), dtype=complex)
         if road:
-            smoothed = self.reduction.bins(np.stack(list(road.values())))
+            smoothed = np.stack(list(road.values()))
+            smoothed = self.reduction.bins(smoothed) if smooth else smoothed
             dS[[at[name] for name in road]] = (smoothed + incoherence * self._diagonal(smoothed)
                                                if k_inc is not None else smoothed)
         special = {"ln_road": S_road}

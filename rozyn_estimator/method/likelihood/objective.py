@@ -21,17 +21,18 @@ is then the negative log posterior and its information ``F + diag(p)``.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import sparse
 
+from rozyn_estimator.method.likelihood.grid import map_bins
 from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
+from rozyn_estimator.method.likelihood.score import SUM_STEP_HZ, covariance_sum
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power
 
 _NEAR = 10.0  # Newton decrement below which the optimiser uses the sharper Hessian
-# The score covariance's sum over frequency takes one bin in this width (the midpoint rule on
-# a smooth summand: measured, within 1e-4 of the covariance at 30-120 s)
-_SUM_STEP_HZ = 0.1
 
 
 def inv2(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -84,21 +85,26 @@ def whitened(S: np.ndarray, dS: np.ndarray) -> np.ndarray:
 
 
 def _exact_rows(
-    inv: np.ndarray, dS: np.ndarray, M: np.ndarray, fisher: np.ndarray, rows: slice
+    inv: np.ndarray, dS_rows: np.ndarray, M: np.ndarray, dS: np.ndarray, fisher_rows: np.ndarray,
+    to_nodes: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> np.ndarray:
-    """Rows ``rows`` of the Hessian of ℓ without the terms of ∂²S: with ``V_i = S⁻¹ ∂_i S`` and
-    ``M = S⁻¹ I``, ``Σ_k tr(V_i V_j M) + tr(V_j V_i M) - tr(V_i V_j)``
-    (its expectation, at ``M = 1``, is the Fisher information).
+    """Rows of the Hessian of ℓ without the terms of ∂²S, for the parameters whose
+    derivatives at the bins are ``dS_rows`` (r, k, 2, 2): with ``V_i = S⁻¹ ∂_i S`` and
+    ``M = S⁻¹ I``, ``Σ_k tr(V_i V_j M) + tr(V_j V_i M) - tr(V_i V_j)`` (its expectation, at
+    ``M = 1``, is the Fisher information, whose rows ``fisher_rows`` are).
 
     By the trace's cyclic property the first two terms are ``tr(Z_i ∂_j S)`` with
     ``Z_i = (M V_i + V_i M) S⁻¹``: only the rows' ``V_i`` are formed, and the sum over the
-    parameters ``j`` is one matrix product (as the gradient's).
+    parameters ``j`` is one matrix product (as the gradient's) — also with ``dS`` at the
+    evaluation grid's nodes, ``Z`` taken there by ``to_nodes`` (the map's adjoint).
     """
-    V = mul2(inv, dS[rows])
+    V = mul2(inv, dS_rows)
     Z = mul2(mul2(M, V) + mul2(V, M), inv)  # (r, k, 2, 2)
+    if to_nodes is not None:
+        Z = to_nodes(Z)
     p = dS.shape[0]
     both = (Z.transpose(0, 1, 3, 2).reshape(Z.shape[0], -1) @ dS.reshape(p, -1).T).real
-    return both - fisher[rows]
+    return both - fisher_rows
 
 
 @dataclass(frozen=True)
@@ -139,6 +145,18 @@ class WhittleObjective:
         self._fisher: np.ndarray | None = None
         self._hess: np.ndarray | None = None
         self._rows: np.ndarray | None = None
+        # The fit's iterations (``fast``): derivatives at the evaluation grid's nodes, the
+        # gradient exact through the map's adjoint, the Fisher information from the bins at
+        # the centre of every ``step`` (the midpoint rule, each weighted by the bins it
+        # stands for): an optimiser's Hessian; the covariance evaluates at every bin again.
+        self.fast = False
+        step = model.reduction.step
+        starts = np.arange(0, model.n_freq, step)
+        counts = np.diff(np.r_[starts, model.n_freq])
+        self._sampled = starts + (counts - 1) // 2
+        self._sample_map = sparse.csr_array(model.reduction.to_bins[self._sampled])
+        self._sample_root_weight = np.tile(np.sqrt(counts), 4)
+        self._nodes: tuple[np.ndarray, np.ndarray] | None = None  # (S at the bins, dS at the nodes)
 
     def restrict(self, m: np.ndarray) -> np.ndarray:
         """Stacked 2x2 matrices (..., 2, 2) as the fit sees them: unchanged, or for the
@@ -163,33 +181,50 @@ class WhittleObjective:
 
     def evaluate(self, theta: np.ndarray) -> tuple[float, np.ndarray]:
         """(ℓ, ∇ℓ) at θ; ℓ = inf where S is not positive definite."""
-        key = np.asarray(theta, dtype=float).tobytes()
+        key = np.asarray(theta, dtype=float).tobytes() + bytes([self.fast])
         if key == self._key and self._value is not None:
             return self._value
-        S, dS = self.model.spectrum(theta)
-        return self.seed(theta, S, dS)
+        if not self.fast:
+            S, dS = self.model.spectrum(theta)
+            return self.seed(theta, S, dS)
+        S_nodes, dS_nodes = self.model.spectrum(theta, smooth=False)
+        assert dS_nodes is not None
+        S, dS_nodes = self.restrict(self.model.reduction.bins(S_nodes)), self.restrict(dS_nodes)
+        value = self._seed(theta, S, dS_nodes, self.model.reduction.adjoint)
+        self._key, self._model, self._nodes = key, None, (S, dS_nodes)
+        return value
 
     def seed(self, theta: np.ndarray, S: np.ndarray, dS: np.ndarray) -> tuple[float, np.ndarray]:
         """(ℓ, ∇ℓ) at θ from the model's S and dS/dθ computed elsewhere (cached as :meth:`evaluate`'s)."""
-        key = np.asarray(theta, dtype=float).tobytes()
         S, dS = self.restrict(S), self.restrict(dS)
-        self._model = (S, dS)
+        value = self._seed(theta, S, dS)
+        self._key, self._model = np.asarray(theta, dtype=float).tobytes() + bytes([False]), (S, dS)
+        return value
+
+    def _seed(self, theta: np.ndarray, S: np.ndarray, dS: np.ndarray,
+              to_nodes: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[float, np.ndarray]:
+        """(ℓ, ∇ℓ) from S at the bins and dS at the bins (or at the nodes, ``to_nodes`` the
+        map's adjoint); resets what was cached of the previous θ."""
         nll, inv, SiI = self._nll(S)
         p = self.model.n_params
         if not math.isfinite(nll):
             value, self._parts = (math.inf, np.zeros(p)), None
         else:
             W = inv - mul2(SiI, inv)  # S⁻¹ - S⁻¹ I S⁻¹
+            if to_nodes is not None:
+                W = to_nodes(W)
             grad = (dS.reshape(p, -1) @ W.transpose(0, 2, 1).ravel()).real  # Σ_k tr(∂S W)
             if self.prior is not None:
                 penalty, slope = self.prior.penalty(np.asarray(theta, dtype=float))
                 nll, grad = nll + penalty, grad + slope
-            value, self._parts = (nll, grad), (inv, dS, SiI)
-        self._key, self._value, self._fisher, self._hess, self._rows = key, value, None, None, None
+            value, self._parts = (nll, grad), (inv, S, SiI)
+        self._value, self._fisher, self._hess, self._rows = value, None, None, None
         return value
 
     def model_at(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(S, dS/dθ) at θ as the fit sees them (restricted), from the last evaluation if it was at θ."""
+        if self.fast:
+            raise ValueError("the model at the bins is not evaluated in the fit's fast iterations")
         self.evaluate(theta)
         assert self._model is not None
         return self._model
@@ -204,16 +239,21 @@ class WhittleObjective:
         """:func:`whitened` rows of the model at θ (the Fisher information is ``R Rᵀ``), cached."""
         self.evaluate(theta)
         if self._rows is None:
-            if self._model is None:
+            if self._nodes is not None and self.fast:
+                S, dS = self._nodes
+                sampled = self.restrict(map_bins(self._sample_map, dS))
+                self._rows = whitened(S[self._sampled], sampled) * self._sample_root_weight
+            elif self._model is not None:
+                self._rows = whitened(*self._model)
+            else:
                 raise ValueError("no model at θ")
-            self._rows = whitened(*self._model)
         return self._rows
 
     def fisher(self, theta: np.ndarray) -> np.ndarray:
         """The Fisher information at θ (the expected Hessian of ℓ, the prior's included)."""
         self.evaluate(theta)
         if self._fisher is None:
-            if self._parts is None or self._model is None:
+            if self._parts is None:
                 self._fisher = np.eye(self.model.n_params)
             else:
                 rows = self.whitened_rows(theta)
@@ -240,8 +280,9 @@ class WhittleObjective:
                 data = fisher if self.prior is None else fisher - np.diag(self.prior.precision)
                 if self.prior is not None:  # the data's gradient: the prior's slope is not S's
                     grad = grad - self.prior.penalty(np.asarray(theta, dtype=float))[1]
-                inv, dS, SiI = self._parts
-                exact = _exact_rows(inv, dS, SiI, data, slice(3, 6))
+                inv, S, SiI = self._parts
+                exact = _exact_rows(inv, self._scale_rows(theta, S), SiI, self._derivatives(), data[3:6],
+                                    self.model.reduction.adjoint if self.fast else None)
                 road = [j for j in range(self.model.n_params) if j not in (4, 5)]
                 exact[0, road] += grad[road]  # and, by symmetry, the column of the road intensity
                 exact[1, 4] += grad[4]
@@ -252,6 +293,23 @@ class WhittleObjective:
                 hess[3:6], hess[:, 3:6] = exact, exact.T
                 self._hess = hess
         return self._hess
+
+    def _derivatives(self) -> np.ndarray:
+        """dS/dθ of the cached evaluation: at the bins, or at the nodes in the fast iterations."""
+        cached = self._nodes if self.fast else self._model
+        assert cached is not None
+        return cached[1]
+
+    def _scale_rows(self, theta: np.ndarray, S: np.ndarray) -> np.ndarray:
+        """dS/dθ at the bins of the road intensity and the noise floors (3, k, 2, 2): the road
+        part of S, and each floor's diagonal entry."""
+        noise = np.exp(theta[4:6])
+        out = np.zeros((3, *S.shape), dtype=S.dtype)
+        out[0] = S
+        out[0, :, 0, 0] -= noise[0] + self.model.min_noise_psd[0]
+        out[0, :, 1, 1] -= noise[1] + self.model.min_noise_psd[1]
+        out[1, :, 0, 0], out[2, :, 1, 1] = noise[0], noise[1]
+        return out
 
     def decrement(self, theta: np.ndarray, free: np.ndarray | None = None) -> float:
         """Newton decrement gᵀF⁻¹g: twice the ℓ a scoring step would still gain (over the
@@ -296,72 +354,5 @@ class WhittleObjective:
         c = np.abs(self.window_dft) ** 2
         centre = (c.size - 1) // 2
         w_hat = self.window_dft[centre - model.half: centre + model.half + 1]  # as the model's kernel
-        step = max(1, int(_SUM_STEP_HZ * self.spectra.n_samples / self.spectra.fs_hz))
-        return _score_covariance(A, S_ext, w_hat, step)
-
-
-def _lag_covariances(
-    S_ext: np.ndarray, w_hat: np.ndarray, bins: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """(lags δ, C_(k, k+δ) at the bins ``k`` of ``bins``): (n_δ,), (n_δ, len(bins), 2, 2).
-
-    ``C_(k, k+δ) = Σ_j ŵ_j ŵ*_(j+δ) S_ext(k - j + J)``: one matrix product of the window
-    products with the shifted spectra, for every lag the window reaches (|δ| ≤ 2J: the
-    small window products of the far lags still add up, 9 % of a 20 s window's mass
-    variance when lags below 1 % were cut).
-    """
-    n = w_hat.size  # 2J + 1
-    lags = np.arange(-(n - 1), n)
-    products = np.zeros((lags.size, n), dtype=complex)  # [δ, j + J] = ŵ_j ŵ*_(j+δ)
-    for row, d in enumerate(lags):
-        j = np.arange(max(0, -int(d)), min(n, n - int(d)))
-        products[row, j] = w_hat[j] * np.conj(w_hat[j + d])
-    shifted = S_ext[(n - 1 - np.arange(n))[:, None] + bins[None, :]]  # [j + J, k] = S_ext[J - j + k]
-    C = products @ shifted.reshape(n, -1)
-    return lags, C.reshape(lags.size, bins.size, 2, 2)
-
-
-def _hermitian_numbers(A: np.ndarray) -> np.ndarray:
-    """(..., 4) real numbers (a, d, Re b, Im b) of Hermitian 2x2 ``[[a, b], [b̄, d]]`` (..., 2, 2)."""
-    return np.stack([A[..., 0, 0].real, A[..., 1, 1].real, A[..., 0, 1].real, A[..., 0, 1].imag], axis=-1)
-
-
-def _congruence(C: np.ndarray) -> np.ndarray:
-    """(..., 4, 4) real ``L`` with ``g(Cᴴ A C) = L h(A)`` for Hermitian ``A``, ``h`` its
-    :func:`_hermitian_numbers` and ``g(G) = (G11, G22, 2 Re G12, 2 Im G12)``, so that
-    ``tr(Cᴴ A C A') = g · h(A')``."""
-    x1, x2, y1, y2 = C[..., 0, 0], C[..., 1, 0], C[..., 0, 1], C[..., 1, 1]  # columns x, y of C
-    xx, yy = np.conj(x1) * x2, np.conj(y1) * y2
-    p11, p22, p12, p21 = np.conj(x1) * y1, np.conj(x2) * y2, np.conj(x1) * y2, np.conj(x2) * y1
-    rows = [
-        [np.abs(x1) ** 2, np.abs(x2) ** 2, 2 * xx.real, -2 * xx.imag],
-        [np.abs(y1) ** 2, np.abs(y2) ** 2, 2 * yy.real, -2 * yy.imag],
-        [2 * p11.real, 2 * p22.real, 2 * (p12.real + p21.real), 2 * (p21.imag - p12.imag)],
-        [2 * p11.imag, 2 * p22.imag, 2 * (p12.imag + p21.imag), 2 * (p12.real - p21.real)],
-    ]
-    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
-
-
-def _score_covariance(A: np.ndarray, S_ext: np.ndarray, w_hat: np.ndarray, step: int) -> np.ndarray:
-    """``Σ_(k,k') Re tr(A_ik C_kk' A_jk' C_k'k)`` over the band's bin pairs (A: (q, k, 2, 2)).
-
-    Per lag ``δ = k' - k`` the summand ``tr(C_kk'ᴴ A_ik C_kk' A_(j,k+δ))`` is a smooth function
-    of ``k`` (model quantities only, no data): summed at the centre bin of every ``step``
-    bins, times the bins it stands for (the midpoint rule). With Hermitian ``A`` it is a real
-    bilinear form ``h(A_ik)ᵀ Lᵀ h(A_(j,k+δ))`` (:func:`_congruence`).
-    """
-    q, k = A.shape[:2]
-    starts = np.arange(0, k, max(1, step))
-    counts = np.diff(np.r_[starts, k])
-    bins = starts + (counts - 1) // 2
-    lags, C = _lag_covariances(S_ext, w_hat, bins)
-    h = _hermitian_numbers(A)  # (q, k, 4)
-    g = np.einsum("dkxy,iky->idkx", _congruence(C), h[:, bins])  # (q, n_δ, kc, 4)
-    partner = bins[None, :] + lags[:, None]
-    # the bins of each block whose partner k + δ lies in the band, counted exactly (the
-    # band's edges are where the summand is not smooth)
-    ends = np.minimum(starts + counts, k - lags[:, None])
-    weight = np.maximum(0, ends - np.maximum(starts, -lags[:, None]))  # (n_δ, kc)
-    other = h[:, np.clip(partner, 0, k - 1)] * weight[None, :, :, None]  # (q, n_δ, kc, 4)
-    out = g.reshape(q, -1) @ other.reshape(q, -1).T
-    return 0.5 * (out + out.T)
+        step = max(1, int(SUM_STEP_HZ * self.spectra.n_samples / self.spectra.fs_hz))
+        return covariance_sum(A, S_ext, w_hat, step)
