@@ -22,7 +22,9 @@ def test_methods_see_the_same_runs():
     results = compare(spec, ["rozyn", "likelihood"], [1, 2], jobs=1)
     for rozyn, refined in zip(results["rozyn"], results["likelihood"], strict=True):
         assert rozyn.seed == refined.seed
-        assert np.array_equal(rozyn.estimate.params, refined.estimate.rozyn.params)
+        # the refined method's Rozyn stage skips the jackknife, so sums its correlations in one
+        # block instead of ten: the same estimate to rounding
+        np.testing.assert_allclose(rozyn.estimate.params, refined.estimate.rozyn.params, rtol=1e-9)
 
 
 def test_compare_table(capsys):

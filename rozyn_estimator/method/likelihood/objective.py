@@ -71,7 +71,8 @@ def whitened(S: np.ndarray, dS: np.ndarray) -> np.ndarray:
     """
     l11 = np.sqrt(S[:, 0, 0].real)
     g = S[:, 1, 0] / S[:, 0, 0].real  # l21 / l11
-    l22 = np.sqrt(S[:, 1, 1].real - np.abs(g) ** 2 * S[:, 0, 0].real)
+    # l22² = det S / S11, with det as inv2 computes it (positive wherever ℓ is finite)
+    l22 = np.sqrt(((S[:, 0, 0] * S[:, 1, 1]).real - np.abs(S[:, 0, 1]) ** 2) / S[:, 0, 0].real)
     a, b, d = dS[:, :, 0, 0].real, dS[:, :, 1, 0], dS[:, :, 1, 1].real  # ∂S's three numbers
     # W = L⁻¹ ∂S L⁻ᴴ with L⁻¹ = [[1/l11, 0], [-l21/(l11 l22), 1/l22]]; per-bin factors once
     p, k = a.shape
