@@ -8,7 +8,8 @@ from rozyn_estimator.tools import bench
 KEYS = ("sim_100s_at_100hz_ms", "road_generation_ms", "update_120s_window_ms",
         "update_120s_window_no_variance_ms", "refined_update_cold_ms", "refined_update_warm_ms",
         "refined_update_warm_without_budget_ms", "glitch_update_warm_ms", "trial_100s_iso_ms",
-        "study_trials_per_second", "study_refined_trials_per_second", "budget_overhead_pct",
+        "study_trials_per_second", "study_refined_trials_per_second", "refined_warm_per_rozyn_update",
+        "refined_cold_per_rozyn_update", "budget_overhead_pct",
         "glitch_per_clean_update", "peak_rss_mb", "goals")
 
 

@@ -1,4 +1,5 @@
-"""The corner values' derivative rows of the half car's spectrum, all rows at once.
+"""The corner values' derivative rows of the half car's spectrum, all rows at once (and the
+sensors', :func:`sensor_dg`).
 
 A corner is the suspension ``z_s = k_s + iω c_s`` on the wheel ``m_t`` on the tyre
 ``z_t = k_t + iω c_t``; condensed, it acts on the body with ``Z = z_s W / d`` and passes
@@ -16,6 +17,7 @@ update: a loop per row cost several times more).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -71,3 +73,20 @@ def corner_outer(
     drive = dT[:, None] * inputs[:, k].swapaxes(0, 1) - dZ[:, None] * x[:, k].swapaxes(0, 1)  # (R, C, F)
     h = np.einsum("rcf,cbf->rbf", drive, g.conj())  # Σ_c drive_c g_cᴴ, (R, 2, F)
     return (Q[:, k].transpose(1, 0, 2)[:, :, None, :] * h[:, None]).transpose(0, 3, 1, 2)
+
+
+def sensor_dg(model: Any, want: set[str], x: list[np.ndarray], g: list[np.ndarray], iw: np.ndarray,
+              rear: np.ndarray | None) -> dict[str, list[np.ndarray]]:
+    """``∂g_c`` by the sensors' positions, the rear's gain and its delay (those of the model's
+    θ in ``want``), per input column ``c``: the sensor rows of ``iω P x``."""
+    zero, rows = np.zeros_like(iw), {}
+    for a, name in enumerate(("sensor_front_x_m", "sensor_rear_x_m")):
+        if name in model.index and name in want:  # ∂g_a/∂x_a = iω [-1/L, 1/L] x (and the rear factor)
+            dP = np.array([-1.0, 1.0]) / model.wheelbase_m
+            factor = rear if a == 1 and rear is not None else 1.0
+            rows[name] = [np.array([iw * (dP @ xc), zero])[:: 1 if a == 0 else -1] * factor for xc in x]
+    if "ln_rear_gain" in model.index and "ln_rear_gain" in want:  # ∂g_r/∂ln(gain) = g_r
+        rows["ln_rear_gain"] = [np.array([zero, gc[1]]) for gc in g]
+    if "time_offset_ms" in model.index and "time_offset_ms" in want:  # ∂g_r/∂τ = -iω g_r (τ in ms)
+        rows["time_offset_ms"] = [np.array([zero, -1e-3 * iw * gc[1]]) for gc in g]
+    return rows

@@ -18,6 +18,7 @@ the road intensity's drift regressed out) estimates it whatever the road; the pu
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -159,12 +160,13 @@ def _block_variances(objective: WhittleObjective, theta: np.ndarray, combos: np.
     if spectra.dft is None or n_blocks < _MIN_BLOCKS or accel.shape[0] != n:
         return None
     psi = _score_series(objective, theta, combos)
-    weights, slopes, share = _partition(n, n_blocks, taper)
-    G = weights @ psi.T  # (B, 3)
+    blocks = _partition(n, n_blocks, taper)
+    share = blocks.share
+    G = np.column_stack([blocks.sums(blocks.weights, row) for row in psi])  # (B, q)
     G -= share[:, None] * G.sum(axis=0)
     y = accel - accel.mean(axis=0)
     power = _moving_average(np.einsum("ta,ta->t", y, y), max(1, round(fs)))
-    drift = -(slopes @ power)
+    drift = -blocks.sums(blocks.slopes, power)
     drift -= share * drift.sum()
     dof = n_blocks - 1
     if drift @ drift > 0:
@@ -196,30 +198,42 @@ def _score_series(objective: WhittleObjective, theta: np.ndarray, combos: np.nda
     return np.einsum("ta,qta->qt", series[0], series[1:]) / (2.0 * fs)
 
 
+@dataclass(frozen=True)
+class _Partition:
+    """A smooth partition of unity over the samples: B blocks, each rising and falling over a
+    block's length with raised cosines, so each sample belongs to two neighbouring blocks
+    (``lower`` and the next) with weights ``cos²`` and ``sin²`` of its place between their
+    centres (to the first and the last alone beyond their centres)."""
+
+    lower: np.ndarray  # (n,) the lower block of each sample
+    weights: np.ndarray  # (2, n) its weight in the lower block and in the next
+    slopes: np.ndarray  # (2, n) their slopes along the samples
+    share: np.ndarray  # (B,) each block's share of the tapered window's power (the score's expectation)
+
+    def sums(self, per_block: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """(B,) ``Σ_t v_b(t) x(t)`` for the blocks' weights (or slopes) ``per_block``."""
+        n_blocks = self.share.size
+        return (np.bincount(self.lower, per_block[0] * x, minlength=n_blocks)
+                + np.bincount(np.minimum(self.lower + 1, n_blocks - 1), per_block[1] * x, minlength=n_blocks))
+
+
 @lru_cache(maxsize=8)
-def _partition(n: int, n_blocks: int, taper: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(B, n) a smooth partition of unity — B blocks, each rising and falling over a block's
-    length with raised cosines (each sample shared by at most two neighbouring blocks) —,
-    its slopes along time, and each block's share of the tapered window's power (the
-    score's expectation). Cached: consecutive windows share it."""
+def _partition(n: int, n_blocks: int, taper: float) -> _Partition:
+    """The blocks of :class:`_Partition` (cached: consecutive windows share it; sparse: two
+    weights per sample, so that a window of another length costs little)."""
     length = n / n_blocks
     t = (np.arange(n) + 0.5) / length - 0.5  # block centres at 0, 1, ..
-    out = np.zeros((n_blocks, n))
-    for b in range(n_blocks):
-        x = np.clip(t - b, -1.0, 1.0)
-        v = np.cos(0.5 * np.pi * x) ** 2
-        if b == 0:
-            v[t < 0] = 1.0
-        if b == n_blocks - 1:
-            v[t > n_blocks - 1] = 1.0
-        out[b] = v
-    weights = out / out.sum(axis=0)
+    lower = np.clip(np.floor(t).astype(int), 0, n_blocks - 1)
+    inside = (t >= 0) & (t <= n_blocks - 1)
+    f = np.where(inside, t - lower, 0.0)  # place between the lower block's centre and the next's
+    weights = np.array([np.cos(0.5 * np.pi * f) ** 2, np.sin(0.5 * np.pi * f) ** 2])
+    slopes = np.array([-1.0, 1.0])[:, None] * (0.5 * np.pi / length * np.sin(np.pi * f) * inside)
     w2 = windows.tukey(n, taper) ** 2 if taper > 0 else np.ones(n)
-    slopes = np.gradient(weights, axis=1)
-    share = weights @ (w2 / w2.sum())
-    for a in (weights, slopes, share):
+    out = _Partition(lower, weights, slopes, np.zeros(n_blocks))
+    out = _Partition(lower, weights, slopes, out.sums(weights, w2 / w2.sum()))
+    for a in (lower, weights, slopes, out.share):
         a.flags.writeable = False  # shared by the cache
-    return weights, slopes, share
+    return out
 
 
 def _moving_average(x: np.ndarray, width: int) -> np.ndarray:

@@ -37,7 +37,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import OptimizeResult, minimize
 
 from rozyn_estimator.method.likelihood.augment import plan
 from rozyn_estimator.method.likelihood.calibration import Calibration
@@ -45,6 +44,7 @@ from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.covariance import NOISE_AT_ZERO, CovarianceError, kept
 from rozyn_estimator.method.likelihood.fitcheck import ModelFit, model_fit
 from rozyn_estimator.method.likelihood.model import CORNERS, HalfCarSpectrum
+from rozyn_estimator.method.likelihood.newton import Fits, noise_share
 from rozyn_estimator.method.likelihood.objective import WhittleObjective
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, window_spectra
 from rozyn_estimator.method.likelihood.uncertainty import uncertainty
@@ -54,8 +54,6 @@ StartStd = np.ndarray | Callable[[], np.ndarray | None] | None
 _MIN_NOISE = 1e-9  # the model's fixed white floor, share of each channel's band power
 _GRID_HZ = (0.8, 1.2, 1.8)  # body frequencies of the coarse start grid
 _CLOSE = 0.25  # the guard: a result this close to the start (share of it) agrees whatever its std
-_STALL_ITERATIONS = 10  # iterations without progress that end a fit (see _stalled)
-_STALLED_TOL = 100.0  # a stalled fit counts as converged with its decrement below this many tol
 
 
 @dataclass(frozen=True)
@@ -182,12 +180,12 @@ def _refine(
                             road_shape_terms=cfg.road_shape_terms,
                             estimate_incoherence=cfg.estimate_incoherence,
                             window_weights=spectra.window_weights,
-                            grid_step=_bins(cfg.grid_hz, spectra))
+                            grid_step=1 if _noise_free(warm, spectra) else _bins(cfg.grid_hz, spectra))
     objective = WhittleObjective(model, spectra, cfg.spectra)
     # A calibration's Newton step of the augmented posterior follows when there are values
     # to calibrate: it also completes the fit's last bit of convergence.
     calibrating = cfg.self_calibrate and plan(vehicle, model).any
-    fits = _Fits(objective, cfg, cfg.tol_calibrated if calibrating else cfg.tol)
+    fits = Fits(objective, cfg, cfg.tol_calibrated if calibrating else cfg.tol)
     given = start if start is not None and _physical(start, L) else None  # a usable start
     warm_theta = None
     if isinstance(warm, Refinement) and warm.theta is not None and warm.theta.size == model.n_params:
@@ -208,12 +206,19 @@ def _refine(
         fits.run(_start_theta(model, spectra, given, cfg.noise_start))
         first = fits.best
         if cfg.second_start and (first is None or not _agrees(model.physical(first.x), start, start_std)
-                                 or _noise_share(first.x, objective).max() > cfg.max_noise_share):
+                                 or noise_share(first.x, objective).max() > cfg.max_noise_share):
             fits.run(_grid_starts(objective, spectra, vehicle, cfg.noise_start)[0])
     else:
         # Cold without a usable start: the coarse grid's two best points.
         for th0 in _grid_starts(objective, spectra, vehicle, cfg.noise_start)[: 2 if cfg.second_start else 1]:
             fits.run(th0)
+    if fits.best is not None and np.isfinite(fits.best.fun) and model.reduction.step > 1 and \
+            np.min(noise_share(fits.best.x, objective)) < NOISE_AT_ZERO:
+        # Nearly noise-free data: S is nearly singular and the interpolated model's small
+        # errors matter (its covariance may not even be positive definite): the fit at every bin.
+        model = model.variant(grid_step=1)
+        objective = WhittleObjective(model, spectra, cfg.spectra)
+        fits = fits.continued(objective)
     best, iterations = fits.best, fits.iterations
     if best is None or not np.isfinite(best.fun):
         return Refinement(status="failed", reason="likelihood fit: no start gave a finite likelihood")
@@ -271,67 +276,20 @@ def _grid_starts(
     return [theta for _, _, theta in scored[:2]]
 
 
-def _noise_share(theta: np.ndarray, objective: WhittleObjective) -> np.ndarray:
-    """(front, rear) fitted noise floor, share of each channel's power in the band."""
-    return np.exp(theta[4:6]) / objective.band_power
+def _noise_free(warm: Refinement | np.ndarray | None, spectra: Spectra) -> bool:
+    """The previous window's fit ran a noise floor to zero (see the fit at every bin)."""
+    theta = warm.theta if isinstance(warm, Refinement) else None
+    return theta is not None and bool(np.min(np.exp(theta[4:6]) / band_power(spectra)) < NOISE_AT_ZERO)
 
 
 def _check_noise(theta: np.ndarray, objective: WhittleObjective, cfg: LikelihoodConfig) -> None:
-    share = _noise_share(theta, objective)
+    share = noise_share(theta, objective)
     for name, value in zip(CORNERS, share, strict=True):
         if value > cfg.max_noise_share:
             raise _FitError(
                 f"likelihood fit explains the {name} channel as mostly noise ({value:.0%} of its power "
                 f"in the band): a wrong basin or a faulty sensor"
             )
-
-
-class _Fits:
-    """Trust-region Newton fits from several starts; keeps the lowest ℓ."""
-
-    def __init__(self, objective: WhittleObjective, cfg: LikelihoodConfig, tol: float) -> None:
-        self.objective, self.cfg, self.tol = objective, cfg, tol
-        self.best: OptimizeResult | None = None
-        self.iterations = self.starts = 0
-        self.converged = False
-
-    def run(self, theta0: np.ndarray) -> None:
-        values: list[float] = []
-
-        def stop_when_converged(intermediate_result: OptimizeResult) -> None:
-            values.append(float(intermediate_result.fun))
-            if self._decrement(intermediate_result.x) < self.tol or _stalled(values, self.tol):
-                raise StopIteration
-
-        self.objective.fast = True  # the iterations' derivatives at the model's nodes
-        try:
-            res = minimize(self.objective.fun, theta0, jac=self.objective.jac, hess=self.objective.hess,
-                           method="trust-exact", callback=stop_when_converged,
-                           options={"gtol": 1e-12, "maxiter": self.cfg.max_iter})
-            self.iterations += int(res.nit)
-            self.starts += 1
-            if np.isfinite(res.fun) and (self.best is None or res.fun < self.best.fun):
-                self.best = res
-                # stalled within a few tol of the optimum: as good as the quadratic model can say
-                limit = self.tol * (_STALLED_TOL if _stalled(values, self.tol) else 1.0)
-                self.converged = self._decrement(res.x) < limit
-        finally:
-            self.objective.fast = False
-
-    def _decrement(self, theta: np.ndarray) -> float:
-        """The Newton decrement over the parameters not at a boundary: a noise floor run to
-        zero (noise-free data) keeps creeping down without changing anything else."""
-        free = np.ones(theta.size, dtype=bool)
-        free[4:6] = _noise_share(theta, self.objective) > NOISE_AT_ZERO
-        return self.objective.decrement(theta, free)
-
-
-def _stalled(values: list[float], tol: float) -> bool:
-    """ℓ improved by less than a tenth of ``tol`` over the last ten iterations: on a short
-    window the fit can crawl along a flat direction (the Hessian is the Fisher information
-    with a few exact rows, not the observed one) by 1e-5 an iteration while the decrement
-    stays just above ``tol``."""
-    return len(values) > _STALL_ITERATIONS and values[-1 - _STALL_ITERATIONS] - values[-1] < 0.1 * tol
 
 
 def _agrees(params: np.ndarray, start: np.ndarray | None, start_std: StartStd) -> bool:

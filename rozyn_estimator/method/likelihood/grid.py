@@ -22,7 +22,7 @@ whose direction turns across the block blurs exactly that. Measured: blocks of 0
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
@@ -39,6 +39,14 @@ class Reduction:
     to_bins: sparse.csr_array  # (k, n_eval): interpolation and the taper's smoothing
 
     to_nodes: sparse.csr_array  # (n_eval, k): the map's transpose (its adjoint)
+    _rows: dict[tuple[int, ...], sparse.csr_array] = field(default_factory=dict, compare=False, repr=False)
+
+    def rows(self, bins: tuple[int, ...]) -> sparse.csr_array:
+        """The map's rows at ``bins`` only (cached per bin set)."""
+        cached = self._rows.get(bins)
+        if cached is None:
+            cached = self._rows[bins] = sparse.csr_array(self.to_bins[list(bins)])
+        return cached
 
     def bins(self, m: np.ndarray) -> np.ndarray:
         """Stacked (..., n_eval, 2, 2) on the evaluation grid -> the band's bins (..., k, 2, 2)."""
@@ -59,6 +67,11 @@ def map_bins(op: sparse.csr_array, m: np.ndarray) -> np.ndarray:
     return np.moveaxis(out.reshape(op.shape[0], *moved.shape[1:]), 0, -3)
 
 
+def node_count(n_ext: int, step: int) -> int:
+    """Nodes of the evaluation grid over ``n_ext`` bins (the last at or beyond the end)."""
+    return n_ext if step == 1 else max(8, math.ceil((n_ext - 1) / step) + 1)
+
+
 def reduction(n_bins: int, kernel: np.ndarray, step: int) -> Reduction:
     """The :class:`Reduction` of ``n_bins`` band bins smoothed by ``kernel`` (2J + 1 taps on
     the extended grid of ``n_bins + 2J`` bins), evaluated every ``step``."""
@@ -67,26 +80,36 @@ def reduction(n_bins: int, kernel: np.ndarray, step: int) -> Reduction:
 
 @lru_cache(maxsize=64)
 def _reduction(n_bins: int, kernel: tuple[float, ...], step: int) -> Reduction:
-    """Cached by window geometry: consecutive windows of a run share it."""
+    """Cached by window geometry: consecutive windows of a run share it (an online window's
+    length jitters by a sample or two: built directly in CSR form, about a millisecond)."""
     taps = np.asarray(kernel)
     n_ext = n_bins + taps.size - 1
-    n_nodes = n_ext if step == 1 else max(8, math.ceil((n_ext - 1) / step) + 1)
+    n_nodes = node_count(n_ext, step)
     nodes = step * np.arange(n_nodes)
-    to_fine = _lagrange(n_ext, step, n_nodes)
-    rows = np.repeat(np.arange(n_bins), taps.size)
-    cols = (np.arange(n_bins)[:, None] + np.arange(taps.size)[None, :]).ravel()
-    smooth = sparse.csr_array((np.tile(taps, n_bins), (rows, cols)), shape=(n_bins, n_ext))
-    to_bins = sparse.csr_array(smooth @ to_fine)
+    first, weights = _lagrange(n_ext, step, n_nodes)  # per fine bin: first node, (points,) weights
+    # bin k is Σ_j taps_j · (fine bin k + j), each fine bin Σ_i weights_i · node (first + i):
+    # a band of nodes starting at first[k] (first is non-decreasing)
+    lo = first[:n_bins]
+    width = int(np.max(first[taps.size - 1:] - lo)) + weights.shape[1]
+    rows = np.arange(n_bins)
+    j = np.arange(taps.size)[:, None]
+    at = (rows * width + first[j + rows] - lo)[:, :, None] + np.arange(weights.shape[1])  # (taps, k, points)
+    values = taps[:, None, None] * weights[j + rows]
+    block = np.bincount(at.ravel(), values.ravel(), minlength=n_bins * width).reshape(n_bins, width)
+    cols = np.minimum(lo[:, None] + np.arange(width)[None, :], n_nodes - 1)  # padding (zeros) stays in range
+    to_bins = sparse.csr_array((block.ravel(), cols.ravel(), np.arange(0, n_bins * width + 1, width)),
+                               shape=(n_bins, n_nodes))
+    to_bins.sum_duplicates()
     to_bins.eliminate_zeros()
     return Reduction(nodes, step, to_bins, sparse.csr_array(to_bins.T))
 
 
-def _lagrange(n_fine: int, step: int, n_nodes: int, points: int = 8) -> sparse.csr_array:
-    """(n_fine, n_nodes) Lagrange interpolation of degree ``points - 1`` from nodes at ``step``
-    spacing (the ``points`` nearest nodes, one-sided at the ends; exact at the nodes; the
-    identity for ``step`` 1)."""
+def _lagrange(n_fine: int, step: int, n_nodes: int, points: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """Lagrange interpolation of degree ``points - 1`` from nodes at ``step`` spacing to every
+    fine bin: (first node (n_fine,), weights (n_fine, points)) over the ``points`` nearest
+    nodes (one-sided at the ends; exact at the nodes; the identity for ``step`` 1)."""
     if step == 1:
-        return sparse.csr_array(sparse.eye_array(n_fine, n_nodes))
+        return np.arange(n_fine), np.ones((n_fine, 1))
     points = min(points, n_nodes)
     x = np.arange(n_fine) / step
     first = np.clip(np.floor(x).astype(int) - (points // 2 - 1), 0, n_nodes - points)
@@ -96,8 +119,4 @@ def _lagrange(n_fine: int, step: int, n_nodes: int, points: int = 8) -> sparse.c
     for j in nodes:
         for m in nodes[nodes != j]:
             w[:, j] *= (t - m) / (j - m)
-    cols = first[:, None] + nodes[None, :]
-    rows = np.repeat(np.arange(n_fine), points)
-    out = sparse.csr_array((w.ravel(), (rows, cols.ravel())), shape=(n_fine, n_nodes))
-    out.eliminate_zeros()
-    return out
+    return first, w

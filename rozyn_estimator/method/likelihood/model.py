@@ -43,8 +43,8 @@ import numpy as np
 from numpy.polynomial import legendre
 from scipy import special
 
-from rozyn_estimator.method.likelihood.corners import CORNERS, CornerState, corner_outer
-from rozyn_estimator.method.likelihood.grid import Reduction, reduction
+from rozyn_estimator.method.likelihood.corners import CORNERS, CornerState, corner_outer, sensor_dg
+from rozyn_estimator.method.likelihood.grid import Reduction, node_count, reduction
 from rozyn_estimator.method.likelihood.road_input import delay_characteristic
 from rozyn_estimator.vehicle import Vehicle
 
@@ -111,10 +111,12 @@ class HalfCarSpectrum:
         self.kernel = c / c.sum()
         self.half, self.n_ext, self.n_freq = half, freq_hz.size + 2 * half, freq_hz.size
         # the grid the model is evaluated on: every grid_step-th bin of the extended grid
-        self.reduction: Reduction = reduction(freq_hz.size, self.kernel, grid_step)
+        self.grid_step = grid_step
+        self._reduction: Reduction | None = None  # the sparse map to the bins: built when first used
         self._fine: HalfCarSpectrum | None = None  # the model at every bin (fine_spectrum)
-        self.n_eval = self.reduction.nodes.size
-        grid = freq_hz[0] + df * (self.reduction.nodes - half) if half or grid_step > 1 else freq_hz
+        nodes = grid_step * np.arange(node_count(self.n_ext, grid_step))
+        self.n_eval = nodes.size
+        grid = freq_hz[0] + df * (nodes - half) if half or grid_step > 1 else freq_hz
         shifts = np.arange(-aliases, aliases + 1)[:, None] * fs_hz
         f = (grid[None, :] + shifts).ravel()  # (A n_eval,) signed
         self.n_alias = 2 * aliases + 1
@@ -343,19 +345,8 @@ class HalfCarSpectrum:
             outer = corner_outer(state, corner_rows, w, Q, np.stack(self.inputs), np.stack(x), np.stack(g))
             stacked = self._hermitian_part(self._fold(outer, weight))
             road |= {f"ln_{q}_{CORNERS[k]}": m for (q, k), m in zip(corner_rows, stacked, strict=True)}
-        zero = np.zeros_like(w)
-        for a, name in enumerate(("sensor_front_x_m", "sensor_rear_x_m")):
-            if name in self.index and name in want:  # ∂g_a/∂x_a = iω [-1/L, 1/L] x (and the rear factor)
-                dP = np.array([-1.0, 1.0]) / self.wheelbase_m
-                factor = rear if a == 1 and rear is not None else 1.0
-                dg = [np.array([iw * (dP @ xc), zero])[:: 1 if a == 0 else -1] * factor for xc in x]
-                road[name] = self._hermitian_part(self._outer_sum(dg, g, weight))
-        if "ln_rear_gain" in self.index and "ln_rear_gain" in want:  # ∂g_r/∂ln(gain) = g_r
-            dg = [np.array([zero, gc[1]]) for gc in g]
-            road["ln_rear_gain"] = self._hermitian_part(self._outer_sum(dg, g, weight))
-        if "time_offset_ms" in self.index and "time_offset_ms" in want:  # ∂g_r/∂τ = -iω g_r (τ in ms)
-            dg = [np.array([zero, -1e-3 * iw * gc[1]]) for gc in g]
-            road["time_offset_ms"] = self._hermitian_part(self._outer_sum(dg, g, weight))
+        for name, dg in sensor_dg(self, want, x, g, iw, rear).items():
+            road[name] = self._hermitian_part(self._outer_sum(dg, g, weight))
         out = list(self.names) if rows is None else list(rows)
         at = {name: i for i, name in enumerate(out)}
         dS = np.zeros((len(out), self.n_freq if smooth else self.n_eval, 2, 2), dtype=complex)
@@ -387,10 +378,17 @@ class HalfCarSpectrum:
             factor = delay if factor is None else factor * delay
         return None if factor is None else np.broadcast_to(factor, self.omega.shape)
 
+    @property
+    def reduction(self) -> Reduction:
+        """The sparse map from the evaluation grid to the bins (:mod:`.grid`)."""
+        if self._reduction is None:
+            self._reduction = reduction(self.n_freq, self.kernel, self.grid_step)
+        return self._reduction
+
     def fine_spectrum(self, theta: np.ndarray) -> np.ndarray:
         """S at every bin of the extended grid (k + 2J, 2, 2), unsmoothed, not interpolated
         (nearly noise-free, S is nearly singular: an interpolation's error could make it indefinite)."""
-        if self.reduction.step == 1:
+        if self.grid_step == 1:
             return self.spectrum(theta, derivatives=False, smooth=False)[0]
         if self._fine is None:
             self._fine = self.variant(grid_step=1)

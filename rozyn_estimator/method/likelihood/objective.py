@@ -25,7 +25,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import sparse
 
 from rozyn_estimator.method.likelihood.grid import map_bins
 from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
@@ -155,7 +154,7 @@ class WhittleObjective:
         starts = np.arange(0, model.n_freq, step)
         counts = np.diff(np.r_[starts, model.n_freq])
         self._sampled = starts + (counts - 1) // 2
-        self._sample_map = sparse.csr_array(model.reduction.to_bins[self._sampled])
+        self._sample_map = model.reduction.rows(tuple(self._sampled.tolist()))
         self._sample_root_weight = np.tile(np.sqrt(counts), 4)
         self._nodes: tuple[np.ndarray, np.ndarray] | None = None  # (S at the bins, dS at the nodes)
 
