@@ -104,12 +104,21 @@ def kept(
 
 
 def inverse_information(info: np.ndarray) -> np.ndarray:
-    """The inverse of a positive-definite information matrix; CovarianceError otherwise."""
+    """The inverse of a positive-definite information matrix; CovarianceError otherwise.
+
+    Judged and inverted scaled to a unit diagonal: the parameters' scales differ by many
+    orders (nearly noise-free data pin the inertia to 1e-8 while a calibrated value stays
+    at its prior's few per cent), which alone is no reason to refuse the matrix.
+    """
     try:
-        eig = np.linalg.eigvalsh(info)
+        d = np.sqrt(np.diag(info))
+        if not (np.all(np.isfinite(d)) and np.all(d > 0)):
+            raise CovarianceError("likelihood fit: the information matrix is not positive definite")
+        scaled = info / np.outer(d, d)
+        eig = np.linalg.eigvalsh(scaled)
         if not (np.all(np.isfinite(eig)) and eig.min() > 1e-12 * eig.max()):
             raise CovarianceError("likelihood fit: the information matrix is not positive definite")
-        return np.linalg.inv(info)
+        return np.linalg.inv(scaled) / np.outer(d, d)
     except np.linalg.LinAlgError:
         raise CovarianceError("likelihood fit: singular information matrix") from None
 

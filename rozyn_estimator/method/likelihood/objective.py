@@ -37,9 +37,9 @@ _NEAR = 10.0  # Newton decrement below which the optimiser uses the sharper Hess
 def inv2(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(inverse, real determinant) of a stack of 2x2 Hermitian matrices (the inverse is
     meaningless where the determinant is not positive: callers check it)."""
-    det = (S[:, 0, 0] * S[:, 1, 1]).real - np.abs(S[:, 0, 1]) ** 2
     inv = np.empty_like(S)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # an optimiser's wild step: inf
+        det = (S[:, 0, 0] * S[:, 1, 1]).real - np.abs(S[:, 0, 1]) ** 2
         inv[:, 0, 0], inv[:, 1, 1] = S[:, 1, 1] / det, S[:, 0, 0] / det
         inv[:, 0, 1], inv[:, 1, 0] = -S[:, 0, 1] / det, -S[:, 1, 0] / det
     return inv, det
