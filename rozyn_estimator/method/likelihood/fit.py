@@ -212,7 +212,7 @@ def _refine(
         # Cold without a usable start: the coarse grid's two best points.
         for th0 in _grid_starts(objective, spectra, vehicle, cfg.noise_start)[: 2 if cfg.second_start else 1]:
             fits.run(th0)
-    if fits.best is not None and np.isfinite(fits.best.fun) and model.reduction.step > 1 and \
+    if fits.best is not None and np.isfinite(fits.best.fun) and model.grid_step > 1 and \
             np.min(noise_share(fits.best.x, objective)) < NOISE_AT_ZERO:
         # Nearly noise-free data: S is nearly singular and the interpolated model's small
         # errors matter (its covariance may not even be positive definite): the fit at every bin.

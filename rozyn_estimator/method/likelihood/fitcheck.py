@@ -38,7 +38,7 @@ import numpy as np
 from scipy import stats
 
 from rozyn_estimator.method.likelihood.calibration import Calibration
-from rozyn_estimator.method.likelihood.objective import WhittleObjective
+from rozyn_estimator.method.likelihood.objective import WhittleObjective, cholesky2
 
 N_BANDS = 8
 ALPHA = 1e-3  # a p-value below this: the model does not fit (a WARN)
@@ -74,9 +74,7 @@ def model_fit(objective: WhittleObjective, theta: np.ndarray, n_free: int,
     S, _ = objective.model.spectrum(theta, derivatives=False)  # the full model, also for an auto fit
     d = spectra.dft / math.sqrt(spectra.n_samples * spectra.fs_hz)
     # w = L⁻¹ d with S = L Lᴴ (Cholesky, written out for 2x2: numpy's loops per matrix)
-    l11 = np.sqrt(S[:, 0, 0].real)
-    l21 = S[:, 1, 0] / l11
-    l22 = np.sqrt(S[:, 1, 1].real - np.abs(l21) ** 2)
+    l11, l21, l22 = cholesky2(S)
     w1 = d[:, 0] / l11
     w = np.column_stack([w1, (d[:, 1] - l21 * w1) / l22])
     f = spectra.freq_hz

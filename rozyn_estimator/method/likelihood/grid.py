@@ -34,8 +34,7 @@ class Reduction:
     """The evaluation grid (every ``step``-th bin of the extended grid) and the sparse map
     from it to the periodograms' expectations at the bins."""
 
-    nodes: np.ndarray  # (n_eval,) extended-grid indices evaluated (the last may lie beyond it)
-    step: int  # bins between nodes
+    step: int  # bins between the evaluation grid's nodes
     to_bins: sparse.csr_array  # (k, n_eval): interpolation and the taper's smoothing
 
     to_nodes: sparse.csr_array  # (n_eval, k): the map's transpose (its adjoint)
@@ -85,7 +84,6 @@ def _reduction(n_bins: int, kernel: tuple[float, ...], step: int) -> Reduction:
     taps = np.asarray(kernel)
     n_ext = n_bins + taps.size - 1
     n_nodes = node_count(n_ext, step)
-    nodes = step * np.arange(n_nodes)
     first, weights = _lagrange(n_ext, step, n_nodes)  # per fine bin: first node, (points,) weights
     # bin k is Σ_j taps_j · (fine bin k + j), each fine bin Σ_i weights_i · node (first + i):
     # a band of nodes starting at first[k] (first is non-decreasing)
@@ -101,7 +99,7 @@ def _reduction(n_bins: int, kernel: tuple[float, ...], step: int) -> Reduction:
                                shape=(n_bins, n_nodes))
     to_bins.sum_duplicates()
     to_bins.eliminate_zeros()
-    return Reduction(nodes, step, to_bins, sparse.csr_array(to_bins.T))
+    return Reduction(step, to_bins, sparse.csr_array(to_bins.T))
 
 
 def _lagrange(n_fine: int, step: int, n_nodes: int, points: int = 8) -> tuple[np.ndarray, np.ndarray]:

@@ -58,6 +58,15 @@ def mul2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
+def cholesky2(S: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(l11, l21, l22) of ``S = L Lᴴ``, ``L = [[l11, 0], [l21, l22]]``, for a stack of positive
+    definite 2x2 Hermitian matrices; ``l22² = det S / S11`` with det as :func:`inv2` computes
+    it (positive wherever ℓ is finite: the textbook ``S22 - |l21|²`` can round below zero)."""
+    l11 = np.sqrt(S[:, 0, 0].real)
+    l22 = np.sqrt(((S[:, 0, 0] * S[:, 1, 1]).real - np.abs(S[:, 0, 1]) ** 2) / S[:, 0, 0].real)
+    return l11, S[:, 1, 0] / l11, l22
+
+
 def whitened(S: np.ndarray, dS: np.ndarray) -> np.ndarray:
     """(p, 4k) real rows ``R_i`` with ``R_i · R_j = Σ_k tr(S⁻¹ ∂_i S S⁻¹ ∂_j S)``, for
     positive definite ``S`` (k, 2, 2) and Hermitian ``dS`` (p, k, 2, 2).
@@ -68,10 +77,8 @@ def whitened(S: np.ndarray, dS: np.ndarray) -> np.ndarray:
     the complex products. The Fisher information is ``R Rᵀ``: the fit's most frequent
     large product.
     """
-    l11 = np.sqrt(S[:, 0, 0].real)
-    g = S[:, 1, 0] / S[:, 0, 0].real  # l21 / l11
-    # l22² = det S / S11, with det as inv2 computes it (positive wherever ℓ is finite)
-    l22 = np.sqrt(((S[:, 0, 0] * S[:, 1, 1]).real - np.abs(S[:, 0, 1]) ** 2) / S[:, 0, 0].real)
+    l11, l21, l22 = cholesky2(S)
+    g = l21 / l11
     a, b, d = dS[:, :, 0, 0].real, dS[:, :, 1, 0], dS[:, :, 1, 1].real  # ∂S's three numbers
     # W = L⁻¹ ∂S L⁻ᴴ with L⁻¹ = [[1/l11, 0], [-l21/(l11 l22), 1/l22]]; per-bin factors once
     p, k = a.shape
@@ -150,7 +157,7 @@ class WhittleObjective:
         # the centre of every ``step`` (the midpoint rule, each weighted by the bins it
         # stands for): an optimiser's Hessian; the covariance evaluates at every bin again.
         self.fast = False
-        step = model.reduction.step
+        step = model.grid_step
         starts = np.arange(0, model.n_freq, step)
         counts = np.diff(np.r_[starts, model.n_freq])
         self._sampled = starts + (counts - 1) // 2
