@@ -6,13 +6,9 @@ Body points at the axles move ``x_sf = x_s + lf*phi`` and ``x_sr = x_s - lr*phi`
 (eqs 3-8, 3-9; the thesis prints ``l_f`` in 3-9 and in the rear damping term of 3-6,
 both typos corrected here).
 
-The road enters through the tyres as displacement (tyre stiffness) and velocity (tyre
-damping). The road displacement is taken piecewise linear between simulation steps
-(first-order hold), so the discretisation is exact for it: the damping term's
-derivative input is removed by a state shift and the result discretised with
-``scipy.signal.cont2discrete(method="foh")``. Blocks are propagated in modal
-coordinates with one first-order ``lfilter`` per mode, so there is no Python loop per
-sample, and the state carries over so a long run equals the concatenation of blocks.
+The road enters through the tyres as displacement and velocity; the model is discretised
+exactly (first-order hold) and propagated block by block in modal coordinates by
+:mod:`sim_node.modal`, so a long run equals the concatenation of blocks.
 
 Departures from the linear model (:mod:`sim_node.departures`), both off by default:
 
@@ -36,12 +32,21 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import expm, solve
-from scipy.signal import cont2discrete, lfilter
+from scipy.linalg import solve
 
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.departures import SuspensionLaw
 from sim_node.fixed_point import solve_fixed_point
+from sim_node.modal import (
+    ModalPropagator,
+    SecondOrderModel,
+    StateSpace,
+    foh_input_shift,
+    natural_modes_of,
+    ramp_response,
+    state_space_of,
+    static_state_of,
+)
 
 N_DOF = 4
 N_STATE = 2 * N_DOF
@@ -51,17 +56,6 @@ MAX_ITERATIONS = 100  # per block
 DENSE_STEPS = 256  # blocks up to this many steps solve their tensions with a response matrix
 NOT_CONVERGED = ("departures: the nonlinear suspension did not converge; use a damper_ratio closer to 1, a "
                  "smaller spring_progression or a larger spring_reference_m")
-
-
-@dataclass(frozen=True)
-class SecondOrderModel:
-    """``M q'' + C q' + K q = Kt u + Ct u'`` with ``u = [road_front, road_rear]`` [m]."""
-
-    mass: np.ndarray  # (4, 4) eq 3-4
-    damping: np.ndarray  # (4, 4) eq 3-6
-    stiffness: np.ndarray  # (4, 4) eq 3-5
-    tyre_stiffness: np.ndarray  # (4, 2) road displacement -> generalised force
-    tyre_damping: np.ndarray  # (4, 2) road velocity -> generalised force
 
 
 def second_order_model(v: Vehicle) -> SecondOrderModel:
@@ -119,31 +113,9 @@ def suspension_rows(v: Vehicle) -> np.ndarray:
     return np.array([[-1.0, 0.0, 1.0, lf], [0.0, -1.0, 1.0, -lr]])
 
 
-@dataclass(frozen=True)
-class StateSpace:
-    """``xi' = a xi + b u``, ``y = c xi + d u`` with ``xi = x - shift @ u``.
-
-    ``x = [q, q']`` (eq 3-2); ``y`` the body accelerations at the sensors [m/s^2]. The
-    shift removes the road-velocity input so ``u`` is the road displacement only.
-    """
-
-    a: np.ndarray  # (8, 8) eq 3-11
-    b: np.ndarray  # (8, 2)
-    c: np.ndarray  # (2, 8)
-    d: np.ndarray  # (2, 2)
-    shift: np.ndarray  # (8, 2)
-
-
 def state_space(v: Vehicle) -> StateSpace:
     """Continuous state space of the half car with road displacement as input."""
-    m = second_order_model(v)
-    minv_k = solve(m.mass, m.stiffness, assume_a="diagonal")
-    minv_c = solve(m.mass, m.damping, assume_a="diagonal")
-    a = np.block([[np.zeros((N_DOF, N_DOF)), np.eye(N_DOF)], [-minv_k, -minv_c]])  # eq 3-11
-    b0 = np.vstack([np.zeros((N_DOF, 2)), solve(m.mass, m.tyre_stiffness, assume_a="diagonal")])
-    b1 = np.vstack([np.zeros((N_DOF, 2)), solve(m.mass, m.tyre_damping, assume_a="diagonal")])
-    c = sensor_rows(v) @ a[N_DOF:, :]  # body rows carry no direct road input
-    return StateSpace(a=a, b=a @ b1 + b0, c=c, d=c @ b1, shift=b1)
+    return state_space_of(second_order_model(v), sensor_rows(v))
 
 
 def with_tension_inputs(ss: StateSpace, v: Vehicle) -> StateSpace:
@@ -161,9 +133,7 @@ def with_tension_inputs(ss: StateSpace, v: Vehicle) -> StateSpace:
 
 def static_state(v: Vehicle, road_m: np.ndarray) -> np.ndarray:
     """State ``x`` at rest on a road held at ``road_m = [front, rear]`` [m]."""
-    m = second_order_model(v)
-    q = solve(m.stiffness, m.tyre_stiffness @ np.asarray(road_m, dtype=float))
-    return np.concatenate([q, np.zeros(N_DOF)])
+    return static_state_of(second_order_model(v), road_m)
 
 
 class HalfCarPlant:
@@ -198,22 +168,10 @@ class HalfCarPlant:
         ss = state_space(vehicle)
         if suspension is not None:
             ss = with_tension_inputs(ss, vehicle)
-        ad, bd, cd, dd, _ = cont2discrete((ss.a, ss.b, ss.c, ss.d), self.dt_s, method="foh")
-        # scipy's FOH state is xi - g @ u; recover g to map physical states in and out.
-        self._foh_shift = ss.shift + _foh_input_shift(ss.a, ss.b, self.dt_s)
-        eigvals, modes = np.linalg.eig(ad)
-        if np.linalg.cond(modes) > 1e10:
-            raise ValueError("half-car transition matrix is not diagonalisable (repeated poles)")
-        to_modal = np.linalg.inv(modes)
-        # The state is real, so conjugate modes carry conjugate coordinates: propagate
-        # one of each pair and count it twice in the output.
-        keep = eigvals.imag >= 0.0
-        weight = np.where(eigvals[keep].imag > 0.0, 2.0, 1.0)
-        self._lam = eigvals[keep]
-        self._to_modal = to_modal[keep]
-        self._in_modal = self._to_modal @ bd
-        self._out_modal = (cd @ modes)[:, keep] * weight
-        self._dd = dd
+        self._modal = p = ModalPropagator(ss, self.dt_s, "half-car")
+        self._foh_shift = p.foh_shift
+        self._lam = p.lam
+        self._in_modal = p.in_modal
         x0 = np.zeros(N_STATE) if x0 is None else np.asarray(x0, dtype=float)
         u0 = np.zeros(2) if u0 is None else np.asarray(u0, dtype=float)
         self._law = suspension
@@ -222,12 +180,12 @@ class HalfCarPlant:
         if suspension is not None:
             # the corners' [e_f, e_r, v_f, v_r] from the modal state and the inputs
             motion = np.kron(np.eye(2), suspension_rows(vehicle))
-            self._motion_modal = (motion @ modes)[:, keep] * weight
+            self._motion_modal = p.project(motion)
             self._motion_direct = motion @ self._foh_shift
             self._tension = suspension.extra_tension_n(*np.split(motion @ x0, 2))
             u0 = np.concatenate([u0, self._tension])
-        self._z = self._to_modal @ (x0 - self._foh_shift @ u0)
-        self._delayed = [_delayed_output(i, d, ss, self.dt_s, modes[:, keep] * weight)
+        self._z = p.modal_state(x0, u0)
+        self._delayed = [_delayed_output(i, d, ss, self.dt_s, p.modes[:, p.keep] * p.weight)
                          for i, d in enumerate(delays_s) if d > 0.0]
         depth = max((d.steps + 1 for d in self._delayed), default=0)
         self._history_z = np.repeat(self._z[:, None], depth, axis=1)
@@ -260,25 +218,14 @@ class HalfCarPlant:
             return np.zeros((0, 2))
         if self._law is None:
             inputs = u
-            z = self._propagate((u @ self._in_modal.T).T, self._z)
+            out, z = self._modal.run(u, self._z)
         else:
             inputs, z = self._solve_tensions(u)
+            out = self._modal.output(z[:, :n], inputs)
         self._z = z[:, n]
-        out = (self._out_modal @ z[:, :n]).real.T + inputs @ self._dd.T
         if self._delayed:
             out = self._delay(out, z[:, :n], inputs)
         return out
-
-    def _propagate(self, drive: np.ndarray, start: np.ndarray) -> np.ndarray:
-        """Modal states at the block's steps and after it, (modes, n + 1), from ``start`` and
-        ``drive`` (modes, n)."""
-        n = drive.shape[1]
-        z = np.empty((self._lam.size, n + 1), dtype=complex)
-        z[:, 0] = start
-        for j, lam in enumerate(self._lam):
-            # z[k+1] = lam z[k] + drive[k], one C loop per mode
-            z[j, 1:] = lfilter([1.0], [1.0, -lam], drive[j], zi=[lam * start[j]])[0]
-        return z
 
     def _solve_tensions(self, road: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The block's inputs ``[road, extra tension]`` (n, 4) at the fixed point, and its states.
@@ -291,7 +238,7 @@ class HalfCarPlant:
         n = road.shape[0]
         law = self._law
         assert law is not None
-        z_road = self._propagate((road @ self._in_modal[:, :2].T).T, self._z)
+        z_road = self._modal.propagate((road @ self._in_modal[:, :2].T).T, self._z)
         motion_road = (self._motion_modal @ z_road[:, :n]).real + self._motion_direct[:, :2] @ road.T
         drive, direct = self._in_modal[:, 2:], self._motion_direct[:, 2:]
         rest = np.zeros_like(self._z)
@@ -301,7 +248,7 @@ class HalfCarPlant:
             if response is not None:
                 motion = motion_road + (response @ tension.ravel()).reshape(4, n)
             else:
-                z = self._propagate(drive @ tension, rest)
+                z = self._modal.propagate(drive @ tension, rest)
                 motion = motion_road + (self._motion_modal @ z[:, :n]).real + direct @ tension
             return law.extra_tension_n(motion[:2].T, motion[2:].T).T, None
 
@@ -310,7 +257,7 @@ class HalfCarPlant:
                                    max_evaluations=MAX_ITERATIONS, failure=NOT_CONVERGED)
         self.iterations = solved.evaluations
         self._tension = solved.x[:, -1].copy()
-        return np.hstack([road, solved.x.T]), z_road + self._propagate(drive @ solved.x, rest)
+        return np.hstack([road, solved.x.T]), z_road + self._modal.propagate(drive @ solved.x, rest)
 
     def _tension_response(self, n: int) -> np.ndarray:
         """(4n, 2n) map from a block's tensions (2, n) to the corners' motion they cause from
@@ -358,29 +305,12 @@ def _delayed_output(channel: int, delay_s: float, ss: StateSpace, dt_s: float,
     """Output ``channel`` of ``ss`` late by ``delay_s``; ``modes`` maps modal states to ``w``."""
     steps = int(np.floor(delay_s / dt_s))
     theta = 1.0 - (delay_s / dt_s - steps)
-    phi, g_now, g_ramp = _ramp_response(ss.a, ss.b, dt_s, theta)
-    g = _foh_input_shift(ss.a, ss.b, dt_s)
+    phi, g_now, g_ramp = ramp_response(ss.a, ss.b, dt_s, theta)
+    g = foh_input_shift(ss.a, ss.b, dt_s)
     c, d = ss.c[channel], ss.d[channel]
     # xi(t_m + theta dt) = phi (w_m + g u_m) + g_now u_m + g_ramp (u_{m+1} - u_m); y = c xi + d u
     return _DelayedOutput(channel, steps, state=c @ phi @ modes, now=c @ (phi @ g + g_now - g_ramp)
                           + d * (1.0 - theta), next=c @ g_ramp + d * theta)
-
-
-def _ramp_response(a: np.ndarray, b: np.ndarray, dt_s: float, fraction: float) -> tuple[np.ndarray, ...]:
-    """``(phi, g_now, g_ramp)``: ``xi(s dt) = phi xi_0 + g_now u_0 + g_ramp (u_1 - u_0)`` at
-    ``s = fraction`` for ``xi' = a xi + b u`` with ``u`` linear from ``u_0`` (s = 0) to ``u_1`` (s = 1)."""
-    n, m = b.shape
-    em = np.zeros((n + 2 * m, n + 2 * m))
-    em[:n, :n] = a * dt_s
-    em[:n, n : n + m] = b * dt_s
-    em[n : n + m, n + m :] = np.eye(m)
-    e = expm(em * fraction)
-    return e[:n, :n], e[:n, n : n + m], e[:n, n + m :]
-
-
-def _foh_input_shift(a: np.ndarray, b: np.ndarray, dt_s: float) -> np.ndarray:
-    """The ``g`` of scipy's FOH discretisation (its state is ``xi - g u``): the ramp's response."""
-    return _ramp_response(a, b, dt_s, 1.0)[2]
 
 
 def free_decay(vehicle: Vehicle, x0: np.ndarray, dt_s: float, n: int) -> np.ndarray:
@@ -390,8 +320,4 @@ def free_decay(vehicle: Vehicle, x0: np.ndarray, dt_s: float, n: int) -> np.ndar
 
 def natural_modes(v: Vehicle) -> tuple[np.ndarray, np.ndarray]:
     """(frequency [Hz], damping ratio) of the four modes, sorted by frequency."""
-    lam = np.linalg.eigvals(state_space(v).a)
-    lam = lam[lam.imag > 0]
-    wn = np.abs(lam)
-    order = np.argsort(wn)
-    return wn[order] / (2 * np.pi), (-lam.real / wn)[order]
+    return natural_modes_of(state_space(v))

@@ -32,7 +32,7 @@ RULES: dict[str, tuple[set[str], bool]] = {
     "sim_node": (SHARED | {f"{PKG}.ros.glue"}, True),
 }
 ROS_FREE_SIM = {"sim_node.halfcar", "sim_node.road", "sim_node.simulation", "sim_node.departures",
-                "sim_node.sensors", "sim_node.fixed_point"}
+                "sim_node.sensors", "sim_node.fixed_point", "sim_node.modal"}
 
 
 def _modules() -> dict[str, Path]:
