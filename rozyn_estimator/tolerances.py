@@ -72,9 +72,10 @@ class Tolerances:
             return data
         if not isinstance(data, Mapping):
             raise ConfigError(f"{source}: vehicle.tolerances: expected a mapping, got {type(data).__name__}")
-        unknown = sorted(str(k) for k in set(data) - set(KEYS))
+        names = [f.name for f in dataclasses.fields(cls)]  # a subclass' too (the full car's)
+        unknown = sorted(str(k) for k in set(data) - set(names))
         if unknown:
-            known = ", ".join(KEYS)
+            known = ", ".join(names)
             raise ConfigError(f"{source}: unknown tolerance(s) {', '.join(unknown)}; known: {known}")
         return dataclasses.replace(cls.none(), **data)
 

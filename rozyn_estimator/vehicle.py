@@ -108,13 +108,17 @@ def vehicle_from_mapping(data: Mapping[str, Any], *, source: str = "vehicle") ->
     """Build a Vehicle from a mapping; unknown keys are refused (typos must not pass)."""
     if not isinstance(data, Mapping):
         raise ConfigError(f"{source}: expected a mapping of vehicle parameters, got {type(data).__name__}")
-    unknown = sorted(str(k) for k in set(data) - {*FIELD_UNITS, "tolerances"})
+    values = dict(data)
+    model = values.pop("model", "half")  # a full car's file says model: full (rozyn_estimator.vehicle_full)
+    if model != "half":
+        raise ConfigError(f"{source}: model: a half-car vehicle has model half, got {one_line(repr(model))} "
+                          "(full-car files are read by rozyn_estimator.vehicle_full.load_any_vehicle)")
+    unknown = sorted(str(k) for k in set(values) - {*FIELD_UNITS, "tolerances"})
     if unknown:
         raise ConfigError(
             f"{source}: unknown vehicle parameter(s) {_listed(unknown)}; "
             f"known: {', '.join(FIELD_UNITS)}, tolerances"
         )
-    values = dict(data)
     try:
         if "tolerances" in values:
             values["tolerances"] = Tolerances.from_mapping(values["tolerances"], source)

@@ -18,7 +18,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PKG = "rozyn_estimator"
-SHARED = {f"{PKG}", f"{PKG}.errors", f"{PKG}.vehicle", f"{PKG}.parameters", f"{PKG}.tolerances"}
+SHARED = {f"{PKG}", f"{PKG}.errors", f"{PKG}.vehicle", f"{PKG}.vehicle_full", f"{PKG}.parameters",
+          f"{PKG}.tolerances"}
 ROS_PACKAGES = {"rclpy", "builtin_interfaces", "diagnostic_msgs", "geometry_msgs", "sensor_msgs", "std_msgs",
                 "nav_msgs", "rcl_interfaces", "rosgraph_msgs"}
 # sub-package -> the project modules it may import (besides its own) and third-party ROS
@@ -32,7 +33,8 @@ RULES: dict[str, tuple[set[str], bool]] = {
     "sim_node": (SHARED | {f"{PKG}.ros.glue"}, True),
 }
 ROS_FREE_SIM = {"sim_node.halfcar", "sim_node.road", "sim_node.simulation", "sim_node.departures",
-                "sim_node.sensors", "sim_node.fixed_point", "sim_node.modal"}
+                "sim_node.sensors", "sim_node.fixed_point", "sim_node.modal",
+                "sim_node.fullcar", "sim_node.tracks"}
 
 
 def _modules() -> dict[str, Path]:

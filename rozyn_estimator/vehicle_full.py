@@ -1,0 +1,312 @@
+"""Vehicle parameters of the 7-DOF full car and their YAML loading.
+
+The full car's data module, beside the half car's :mod:`rozyn_estimator.vehicle` (which it
+reuses: YAML safety, messages, tolerances). Shared by the plant (:mod:`sim_node.fullcar`)
+and, later, the full-car estimator.
+
+Coordinates and signs:
+
+- ``x`` along the body from the front axle, positive rearward (as the half car); ``y``
+  lateral, positive to the left (REP 103); ``z`` up.
+- Pitch ``phi`` positive nose up, as the half car (minus REP 103's pitch about +y);
+  roll ``theta`` positive left side up: REP 103's roll, right-handed about +x forward.
+  A body point at ``(x, y)`` moves ``z + (lf - x) phi + (y - y_cog) theta`` (small angles).
+- Corners in the order FL, FR, RL, RR; every per-corner tuple and every four-channel
+  array follows it. The left wheels sit at ``y = +track/2``, the right ones at ``-track/2``.
+
+Defaults (Table 5-1 extended): the thesis calls its half car's coordinates "the front
+wheels" and "the rear wheels" and ``m_t`` the "mass of the wheels" (chapter 3), with a
+1000 kg "body mass": its half car is the whole car seen from the side, each axle's two
+corners lumped. So the full car keeps the body (m 1000 kg, I_yy 2000 kg m^2, lf 1.2 m,
+wheelbase 2.8 m) and splits each axle value over its two corners: unsprung 20/32.5 kg,
+tyres 100 kN/m and 25 N s/m, suspension 22.5/40 kN/m and 1400/1750 N s/m per corner. The
+symmetric full car then has the half car's heave and pitch modes exactly, and
+:func:`centreline_half_car` of the defaults is the default :class:`Vehicle`. Tracks 1.5 m
+(a mid-size car's). Roll inertia 400 kg m^2: a roll radius of gyration of 0.63 m, 0.42
+of the track, typical of passenger cars (the pitch default has 1.41 m, half the
+wheelbase). Lateral CoG 0, no anti-roll bars; the accelerometers sit above the wheels.
+
+Anti-roll bars are given as the roll stiffness each adds to its axle, in N*m/rad: a bar
+of ``K`` adds the energy ``K/2 ((e_L - e_R)/track)^2``, ``e`` the corners' suspension
+extensions, i.e. a spring of ``K / track^2`` N/m between the two corners' deflections.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any, ClassVar
+
+from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.parameters import check, param, spec_of
+from rozyn_estimator.tolerances import Tolerances
+from rozyn_estimator.vehicle import (
+    MAX_VEHICLE_FILE_BYTES,
+    Vehicle,
+    _listed,
+    _vehicle_section,
+    load_yaml_file,
+    one_line,
+    vehicle_from_mapping,
+)
+
+CORNERS = ("front_left", "front_right", "rear_left", "rear_right")
+MODELS = ("half", "full")
+Quad = tuple[float, float, float, float]
+_POSITIVE: dict[str, Any] = {"low": 0.0, "open_low": True, "length": 4}
+_SHARE = {"low": 0.0, "high": 1.0}
+
+
+@dataclass(frozen=True)
+class FullTolerances(Tolerances):
+    """The half car's tolerances (an axle's share applies to both its corners; the sensor
+    offsets to the ``x`` of that axle's sensors) and the full car's own."""
+
+    track_front_m: float = param(0.005, "front track width", unit="m", low=0.0, high=1.0)
+    track_rear_m: float = param(0.005, "rear track width", unit="m", low=0.0, high=1.0)
+    anti_roll_stiffness_front_nmprad: float = param(0.10, "front anti-roll bar, share of its value", **_SHARE)
+    anti_roll_stiffness_rear_nmprad: float = param(0.10, "rear anti-roll bar, share of its value", **_SHARE)
+    sensor_lateral_m: float = param(0.01, "accelerometers' lateral positions", unit="m", low=0.0, high=1.0)
+
+    def half_car(self) -> Tolerances:
+        """The half car's part."""
+        return Tolerances(**{f.name: getattr(self, f.name) for f in fields(Tolerances)})
+
+
+@dataclass(frozen=True)
+class FullVehicle:
+    """Full-car parameters, SI units; see the module's docstring for coordinates and defaults.
+
+    ``sprung_mass_kg``, ``roll_inertia_kgm2``, ``pitch_inertia_kgm2``,
+    ``cog_from_front_axle_m`` and ``cog_lateral_m`` are the simulator's truth (what a
+    full-car estimator identifies); the rest is assumed known, to its ``tolerances``.
+    The body's principal axes are taken as x and y (no product of inertia).
+
+    Example:
+        >>> v = FullVehicle(cog_lateral_m=0.05)
+        >>> v.corner_y_m
+        (0.75, -0.75, 0.75, -0.75)
+        >>> centreline_half_car(FullVehicle()) == Vehicle()
+        True
+    """
+
+    PARAM_PREFIX: ClassVar[str] = "vehicle."
+
+    sprung_mass_kg: float = param(1000.0, "sprung mass (the simulator's truth)", unit="kg", low=0.0,
+                                  open_low=True)
+    pitch_inertia_kgm2: float = param(2000.0, "pitch moment of inertia of the sprung mass (the simulator's "
+                                      "truth)", unit="kg*m^2", low=0.0, open_low=True)
+    roll_inertia_kgm2: float = param(400.0, "roll moment of inertia of the sprung mass about its centre of "
+                                     "gravity (the simulator's truth)", unit="kg*m^2", low=0.0, open_low=True)
+    cog_from_front_axle_m: float = param(1.2, "centre of gravity behind the front axle (the simulator's "
+                                         "truth)", unit="m")
+    cog_lateral_m: float = param(0.0, "centre of gravity left of the centreline (negative: right of it; the "
+                                 "simulator's truth)", unit="m")
+    wheelbase_m: float = param(2.8, "wheelbase", unit="m", low=0.0, open_low=True)
+    track_front_m: float = param(1.5, "front track width (between the wheels' centres)", unit="m", low=0.0,
+                                 open_low=True)
+    track_rear_m: float = param(1.5, "rear track width", unit="m", low=0.0, open_low=True)
+    unsprung_mass_kg: Quad = param((20.0, 20.0, 32.5, 32.5), "unsprung mass of each corner (FL, FR, RL, RR)",
+                                   unit="kg", **_POSITIVE)
+    tyre_stiffness_npm: Quad = param((100_000.0,) * 4, "tyre vertical stiffness of each corner", unit="N/m",
+                                     **_POSITIVE)
+    tyre_damping_nspm: Quad = param((25.0,) * 4, "tyre damping of each corner", unit="N*s/m", low=0.0,
+                                    length=4)
+    suspension_stiffness_npm: Quad = param((22_500.0, 22_500.0, 40_000.0, 40_000.0), "suspension stiffness "
+                                           "of each corner (at the wheel)", unit="N/m", **_POSITIVE)
+    suspension_damping_nspm: Quad = param((1400.0, 1400.0, 1750.0, 1750.0), "suspension damping of each "
+                                          "corner (at the wheel)", unit="N*s/m", **_POSITIVE)
+    anti_roll_stiffness_front_nmprad: float = param(0.0, "roll stiffness the front anti-roll bar adds (0: "
+                                                    "none)", unit="N*m/rad", low=0.0)
+    anti_roll_stiffness_rear_nmprad: float = param(0.0, "roll stiffness the rear anti-roll bar adds (0: "
+                                                   "none)", unit="N*m/rad", low=0.0)
+    sensor_x_m: Quad = param((0.0, 0.0, 2.8, 2.8), "accelerometers (FL, FR, RL, RR) behind the front axle",
+                             unit="m", length=4)
+    sensor_y_m: Quad = param((0.75, -0.75, 0.75, -0.75), "accelerometers (FL, FR, RL, RR) left of the "
+                             "centreline", unit="m", length=4)
+    tolerances: FullTolerances = param(description="standard uncertainties of the assumed values",
+                                       default_factory=FullTolerances)
+
+    def __post_init__(self) -> None:
+        check(self, _RULES)
+
+    @property
+    def cog_from_rear_axle_m(self) -> float:
+        """lr = wheelbase - lf [m]."""
+        return self.wheelbase_m - self.cog_from_front_axle_m
+
+    @property
+    def corner_x_m(self) -> Quad:
+        """The corners' ``x`` (FL, FR, RL, RR) behind the front axle [m]."""
+        return (0.0, 0.0, self.wheelbase_m, self.wheelbase_m)
+
+    @property
+    def corner_y_m(self) -> Quad:
+        """The corners' ``y`` (FL, FR, RL, RR), positive left [m]."""
+        f, r = 0.5 * self.track_front_m, 0.5 * self.track_rear_m
+        return (f, -f, r, -r)
+
+    @property
+    def is_symmetric(self) -> bool:
+        """Left and right alike (values, CoG on the centreline): heave and pitch do not couple
+        with roll, and :func:`centreline_half_car` is exact."""
+        pairs = (self.unsprung_mass_kg, self.tyre_stiffness_npm, self.tyre_damping_nspm,
+                 self.suspension_stiffness_npm, self.suspension_damping_nspm)
+        return self.cog_lateral_m == 0.0 and all(p[0] == p[1] and p[2] == p[3] for p in pairs)
+
+    def replace(self, **changes: Any) -> FullVehicle:
+        """A copy with some fields changed (validated)."""
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """``model: full``, the fields (floats, lists of four) and ``tolerances``, as a vehicle file
+        holds them."""
+        out: dict[str, Any] = {"model": "full"}
+        for name in FULL_FIELD_UNITS:
+            value = getattr(self, name)
+            out[name] = [float(x) for x in value] if isinstance(value, tuple) else float(value)
+        out["tolerances"] = self.tolerances.to_dict()
+        return out
+
+
+def _spans(v: FullVehicle) -> tuple[float, float]:
+    """(x of the rear sensors' mean minus the front ones', y of the left ones' mean minus the
+    right ones')."""
+    x, y = v.sensor_x_m, v.sensor_y_m
+    return (x[2] + x[3] - x[0] - x[1]) / 2, (y[0] + y[2] - y[1] - y[3]) / 2
+
+
+_RULES = (
+    ("cog_from_front_axle_m", lambda v: 0.0 < v.cog_from_front_axle_m < v.wheelbase_m,
+     "must lie between the axles (0 < lf < wheelbase_m)"),
+    ("cog_lateral_m", lambda v: abs(v.cog_lateral_m) < 0.5 * min(v.track_front_m, v.track_rear_m),
+     "must lie between the wheels (|y_cog| < half the narrower track)"),
+    ("sensor_x_m", lambda v: _spans(v)[0] >= 0.25 * v.wheelbase_m,
+     "the rear accelerometers (RL, RR) must sit on average at least a quarter wheelbase behind the front "
+     "ones (FL, FR) to see pitch"),
+    ("sensor_y_m", lambda v: _spans(v)[1] >= 0.25 * v.track_front_m,
+     "the left accelerometers (FL, RL) must sit on average at least a quarter front track left of the right "
+     "ones (FR, RR) to see roll"),
+)
+FULL_FIELD_UNITS: Mapping[str, str] = {
+    f.name: spec.unit for f in fields(FullVehicle)
+    if (spec := spec_of(f)) is not None and f.name != "tolerances"
+}
+"""The keys a full-car vehicle file may hold besides ``model`` and ``tolerances``, with their units."""
+
+
+def centreline_half_car(v: FullVehicle) -> Vehicle:
+    """The half car whose heave and pitch are the symmetric full car's, exactly.
+
+    Each axle's values are the sums of its two corners' (the thesis' half car lumps an
+    axle's wheels); mass, pitch inertia and CoG are the full car's. Its sensors sit at the
+    mean ``x`` of the front (FL, FR) and of the rear (RL, RR) accelerometers: the mean of a
+    left and a right sensor at equal ``|y|`` reads the centreline. Driven by the mean of
+    the left and right road tracks it gives the full car's heave and pitch
+    (``test_fullcar``). Anti-roll bars and tracks act on roll only.
+
+    Raises:
+        ConfigError: ``v`` is not symmetric (then heave and pitch couple with roll and no
+            half car describes them).
+    """
+    if not v.is_symmetric:
+        raise ConfigError("vehicle: a centreline half car needs a symmetric full car (equal left and right "
+                          "corners, cog_lateral_m 0)")
+
+    def axles(values: Quad) -> tuple[float, float]:
+        return values[0] + values[1], values[2] + values[3]
+
+    x = v.sensor_x_m
+    return Vehicle(
+        sprung_mass_kg=v.sprung_mass_kg, pitch_inertia_kgm2=v.pitch_inertia_kgm2,
+        cog_from_front_axle_m=v.cog_from_front_axle_m, wheelbase_m=v.wheelbase_m,
+        **_axle_fields("unsprung_mass_{}_kg", axles(v.unsprung_mass_kg)),
+        **_axle_fields("tyre_stiffness_{}_npm", axles(v.tyre_stiffness_npm)),
+        **_axle_fields("tyre_damping_{}_nspm", axles(v.tyre_damping_nspm)),
+        **_axle_fields("suspension_stiffness_{}_npm", axles(v.suspension_stiffness_npm)),
+        **_axle_fields("suspension_damping_{}_nspm", axles(v.suspension_damping_nspm)),
+        sensor_front_offset_m=(x[0] + x[1]) / 2, sensor_rear_offset_m=(x[2] + x[3]) / 2 - v.wheelbase_m,
+        tolerances=v.tolerances.half_car(),
+    )
+
+
+def _axle_fields(pattern: str, values: tuple[float, float]) -> dict[str, float]:
+    return {pattern.format("front"): values[0], pattern.format("rear"): values[1]}
+
+
+def full_vehicle_from_mapping(data: Mapping[str, Any], *, source: str = "vehicle") -> FullVehicle:
+    """Build a FullVehicle from a mapping (``model: full`` optional); unknown keys are refused."""
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"{source}: expected a mapping of vehicle parameters, got {type(data).__name__}")
+    values = dict(data)
+    model = values.pop("model", "full")
+    if model != "full":
+        raise ConfigError(f"{source}: model: expected full for a full-car vehicle, got "
+                          f"{one_line(repr(model))}")
+    unknown = sorted(str(k) for k in set(values) - {*FULL_FIELD_UNITS, "tolerances"})
+    if unknown:
+        raise ConfigError(f"{source}: unknown full-car vehicle parameter(s) {_listed(unknown)}; known: "
+                          f"model, {', '.join(FULL_FIELD_UNITS)}, tolerances")
+    try:
+        if "tolerances" in values:
+            values["tolerances"] = FullTolerances.from_mapping(values["tolerances"], source)
+        return FullVehicle(**values)
+    except ConfigError as exc:
+        raise ConfigError(one_line(str(exc) if str(exc).startswith(source) else f"{source}: {exc}")) from None
+
+
+def any_vehicle_from_mapping(data: Mapping[str, Any], *, source: str = "vehicle") -> Vehicle | FullVehicle:
+    """A :class:`FullVehicle` when the mapping says ``model: full``, else a half-car :class:`Vehicle`
+    (``model: half`` or no ``model``: the half car stays the default)."""
+    model = data.get("model", "half") if isinstance(data, Mapping) else "half"
+    if model not in MODELS:
+        raise ConfigError(f"{source}: model: must be one of {', '.join(MODELS)}, got {one_line(repr(model))}")
+    if model == "full":
+        return full_vehicle_from_mapping(data, source=source)
+    return vehicle_from_mapping(data, source=source)
+
+
+def load_any_vehicle(path: str | Path) -> Vehicle | FullVehicle:
+    """Load a vehicle file, half car or (with ``model: full``) full car.
+
+    The file is a flat mapping or a ROS 2 parameter file, read as safely as
+    :func:`rozyn_estimator.vehicle.load_vehicle` reads it; missing fields keep their defaults.
+
+    Raises:
+        ConfigError: the file is missing, malformed, or a field is invalid or unknown (one
+            line naming the file and the field).
+    """
+    p = Path(path)
+    data = load_yaml_file(p, max_bytes=MAX_VEHICLE_FILE_BYTES, what="vehicle file")
+    return any_vehicle_from_mapping(_vehicle_section(data, str(p)), source=str(p))
+
+
+def load_full_vehicle(path: str | Path) -> FullVehicle:
+    """Load a full-car vehicle file (it must say ``model: full``).
+
+    Raises:
+        ConfigError: as :func:`load_any_vehicle`, or the file is a half car's.
+    """
+    vehicle = load_any_vehicle(path)
+    if not isinstance(vehicle, FullVehicle):
+        raise ConfigError(f"{one_line(str(path))}: a half-car vehicle file; a full car's says model: full")
+    return vehicle
+
+
+def dump_full_vehicle(v: FullVehicle) -> str:
+    """The vehicle as a flat YAML mapping (``model: full`` first) with units as comments."""
+    lines = ["model: full"]
+    for key, unit in FULL_FIELD_UNITS.items():
+        value = getattr(v, key)
+        shown = f"[{', '.join(repr(float(x)) for x in value)}]" if isinstance(value, tuple) else repr(value)
+        lines.append(f"{key}: {shown}  # {unit}")
+    lines.append("tolerances:  # standard uncertainties: shares of the values, or m, or s")
+    lines += [f"  {k}: {value!r}" for k, value in v.tolerances.to_dict().items()]
+    return "\n".join(lines) + "\n"
+
+
+__all__ = ["CORNERS", "FULL_FIELD_UNITS", "FullTolerances", "FullVehicle", "any_vehicle_from_mapping",
+           "centreline_half_car", "dump_full_vehicle", "full_vehicle_from_mapping", "load_any_vehicle",
+           "load_full_vehicle"]
