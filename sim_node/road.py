@@ -96,6 +96,30 @@ class RoadSpec:
         return np.where(inside, g, 0.0) if self.kind != "flat" else np.zeros_like(n)
 
 
+def road_grid(spec: RoadSpec, period_m: float | None) -> tuple[float, int]:
+    """(period [m], grid points) of a road: ``period_m`` (None: DEFAULT_PERIOD_M) on a fast FFT
+    length with spacing at most ``spec.dx_m``."""
+    period = DEFAULT_PERIOD_M if period_m is None else float(period_m)
+    if not period > 2.0 * spec.dx_m:
+        raise ConfigError(f"road period must exceed two grid steps, got {period!r} m")
+    return period, sfft.next_fast_len(int(np.ceil(period / spec.dx_m)), real=True)
+
+
+def spectrum(spec: RoadSpec, period_m: float, n_grid: int) -> tuple[np.ndarray, float]:
+    """(Gd [m^3] at the grid's spatial frequencies ``k dn``, k = 0 … n_grid // 2; ``dn = 1/period``
+    [cycles/m])."""
+    dn = 1.0 / period_m
+    return spec.psd_m3(np.arange(n_grid // 2 + 1) * dn), dn
+
+
+def iso_coefficients(spec: RoadSpec, gd: np.ndarray, dn: float, rng: np.random.Generator) -> np.ndarray:
+    """Random Fourier coefficients ``c_k`` with mean square ``2 Gd dn`` (eq 4-6): a fixed amplitude
+    and a uniform phase, or complex Gaussian (``spec.amplitudes``)."""
+    if spec.amplitudes == "fixed":
+        return np.sqrt(2.0 * gd * dn) * np.exp(2j * np.pi * rng.random(gd.size))
+    return np.sqrt(gd * dn) * (rng.standard_normal(gd.size) + 1j * rng.standard_normal(gd.size))
+
+
 class Road:
     """A seeded road profile, read at any distances.
 
@@ -106,33 +130,28 @@ class Road:
             ``DEFAULT_PERIOD_M``. A run of known length sets it to the distance its
             record covers: then ``dn = 1 / L`` as in eq 4-7, and the components are
             orthogonal over the record, as in the thesis.
+        coefficients: the profile's complex Fourier coefficients ``c_k`` (the height is
+            ``sum_k Re(c_k exp(2 pi i k s / period))``, ``k = 0 … n_grid // 2``) instead of
+            drawn ones (:mod:`sim_node.tracks` makes a right track this way); the Laplace
+            envelope is still the seed's.
     """
 
-    def __init__(self, spec: RoadSpec, seed: int, period_m: float | None = None) -> None:
+    def __init__(self, spec: RoadSpec, seed: int, period_m: float | None = None, *,
+                 coefficients: np.ndarray | None = None) -> None:
         self.spec = spec
         self.seed = int(seed)
-        period = DEFAULT_PERIOD_M if period_m is None else float(period_m)
-        if not period > 2.0 * spec.dx_m:
-            raise ConfigError(f"road period must exceed two grid steps, got {period!r} m")
-        n_grid = sfft.next_fast_len(int(np.ceil(period / spec.dx_m)), real=True)
-        self.period_m = period
-        self.dx_m = period / n_grid  # at most spec.dx_m
-        self._grid = self._base_profile(n_grid)
-        self._sections: dict[int, np.ndarray] = {}
-
-    def _base_profile(self, n_grid: int) -> np.ndarray:
-        """The periodic ISO profile on the grid (eqs 4-6, 4-7), via one inverse FFT."""
-        spec = self.spec
-        dn = 1.0 / self.period_m
-        k = np.arange(n_grid // 2 + 1)
-        gd = spec.psd_m3(k * dn)
-        rng = np.random.default_rng([self.seed, 0])
-        if spec.amplitudes == "fixed":
-            coeff = np.sqrt(2.0 * gd * dn) * np.exp(2j * np.pi * rng.random(k.size))
-        else:
-            coeff = np.sqrt(gd * dn) * (rng.standard_normal(k.size) + 1j * rng.standard_normal(k.size))
+        self.period_m, n_grid = road_grid(spec, period_m)
+        self.dx_m = self.period_m / n_grid  # at most spec.dx_m
+        if coefficients is None:
+            coefficients = iso_coefficients(spec, *spectrum(spec, self.period_m, n_grid),
+                                            np.random.default_rng([self.seed, 0]))
+        elif np.shape(coefficients) != (n_grid // 2 + 1,):
+            raise ValueError(f"coefficients must have shape ({n_grid // 2 + 1},), got "
+                             f"{np.shape(coefficients)}")
+        # The periodic ISO profile on the grid (eqs 4-6, 4-7), via one inverse FFT:
         # irfft(X)[j] = (1/N) sum_k X_k e^{2 pi i k j / N} (hermitian) -> X_k = N/2 * coeff_k
-        return sfft.irfft(coeff * (n_grid / 2.0), n=n_grid)
+        self._grid = sfft.irfft(coefficients * (n_grid / 2.0), n=n_grid)
+        self._sections: dict[int, np.ndarray] = {}
 
     def heights(self, s_m: np.ndarray) -> np.ndarray:
         """Road height [m] at distances ``s_m`` [m] (any shape, any order)."""
