@@ -28,16 +28,16 @@ LOWPASS_ORDER = 2
 
 
 class Accelerometers:
-    """The front and rear accelerometers, streaming.
+    """The accelerometers (front and rear; the full car's four), streaming.
 
     Args:
         departures: the sensors' gains and low-pass (the plant's are not used here).
         plant_rate_hz: the rate of the accelerations given to :meth:`lowpass`.
-        bias_mps2: (front, rear) constant offsets.
+        bias_mps2: constant offsets, one per channel (front, rear).
         include_gravity: add +g to the specific force (REP 145).
     """
 
-    def __init__(self, departures: Departures, plant_rate_hz: float, bias_mps2: tuple[float, float],
+    def __init__(self, departures: Departures, plant_rate_hz: float, bias_mps2: tuple[float, ...],
                  include_gravity: bool) -> None:
         self._sos = None
         if departures.lowpass_hz > 0.0:
@@ -49,7 +49,7 @@ class Accelerometers:
         self._gravity = GRAVITY_MPS2 if include_gravity else 0.0
 
     def lowpass(self, accel_mps2: np.ndarray) -> np.ndarray:
-        """The IMU low-pass over (n, 2) front/rear accelerations at the plant's rate (continuing)."""
+        """The IMU low-pass over (n, channels) accelerations at the plant's rate (continuing)."""
         if self._sos is None or accel_mps2.shape[0] == 0:
             return accel_mps2
         if self._state is None:  # settled on the first value: (sections, 2 states, 2 channels)
@@ -58,7 +58,7 @@ class Accelerometers:
         return np.asarray(out)
 
     def read(self, accel_mps2: np.ndarray) -> np.ndarray:
-        """(n, 2) sampled body accelerations -> what the sensors read (before noise)."""
+        """(n, channels) sampled body accelerations -> what the sensors read (before noise)."""
         if self._gains is None:  # today's operations, so runs without departures stay bit for bit
             accel = accel_mps2 + self._bias
             return accel + self._gravity if self._gravity else accel

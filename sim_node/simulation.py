@@ -1,14 +1,22 @@
-"""A streaming simulation run: road + speed profile + half car + accelerometers.
+"""A streaming simulation run: road + speed profile + half (or full) car + accelerometers.
 
 ``Simulation.next_block(n)`` returns the next ``n`` accelerometer samples; the state of
 the plant, the distance travelled, the sensors' filters and the noise stream carry over,
 so a run cut into blocks equals the same run made at once and memory stays bounded
 however long it runs. ``SimConfig.departures`` makes the plant and the sensors depart
 from the estimator's model (:mod:`sim_node.departures`); by default they do not.
+
+``SimConfig.model = "full"`` runs the 7-DOF full car (:mod:`sim_node.fullcar`) of
+``full_vehicle`` over two road tracks (:mod:`sim_node.tracks`, coherence
+``track_coherence``): the blocks then carry four accelerometer channels in the order FL,
+FR, RL, RR (``SimBlock.channels``) at the vehicle's ``sensor_x_m``/``sensor_y_m``, and the
+truth is ``SimConfig.plant_vehicle``. Of the departures the full car takes only the
+sensors' low-pass; the half car stays the default and its runs are unchanged.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import ClassVar
@@ -17,13 +25,18 @@ import numpy as np
 
 from rozyn_estimator.parameters import check, param
 from rozyn_estimator.vehicle import Vehicle
+from rozyn_estimator.vehicle_full import CORNERS, MODELS, FullVehicle
+from sim_node import fullcar
 from sim_node.departures import Departures
 from sim_node.halfcar import N_DOF, N_STATE, HalfCarPlant, static_state
 from sim_node.road import Road, RoadSpec
 from sim_node.sensors import GRAVITY_MPS2, Accelerometers
+from sim_node.tracks import COHERENCES, RoadTracks
 
 # Thesis' free-decay start (main listing): wheels -0.015 m, body -0.03 m, no pitch.
 THESIS_FREE_DECAY_STATE = (-0.015, -0.015, -0.03, 0.0, 0.0, 0.0, 0.0, 0.0)
+FULL_FREE_DECAY_STATE = (-0.015,) * 4 + (-0.03,) + (0.0,) * 9  # the same for the full car: no roll
+HALF_CHANNELS = ("front", "rear")
 
 
 @dataclass(frozen=True)
@@ -58,19 +71,50 @@ class SimConfig:
     initial_state: tuple[float, ...] | None = None  # free decay start; flat roads only
     departures: Departures = param(description="departures from the estimator's model (departures.* "
                                    "parameters)", default_factory=Departures)
+    model: str = param("half", "vehicle model: half (4-DOF, accelerometers front and rear) or full (7-DOF, "
+                       "four accelerometers FL, FR, RL, RR)", choices=MODELS, ros_name="")
+    full_vehicle: FullVehicle | None = None  # the full car (model full; None: its defaults)
+    track_coherence: str = param("isotropic", "coherence of the left and right road tracks (model full)",
+                                 choices=COHERENCES, ros_name="")
 
     def __post_init__(self) -> None:
         check(self, (
             ("speed_variation", lambda c: c.speed_variation < 1.0, "must lie in [0, 1)"),
-            ("initial_state", lambda c: c.initial_state is None or len(c.initial_state) == N_STATE,
-             f"expected {N_STATE} numbers"),
+            ("initial_state", lambda c: c.initial_state is None or len(c.initial_state) == c.n_state,
+             f"expected {N_STATE} numbers ({fullcar.N_STATE} with model full)"),
             ("departures", lambda c: c.departures.lowpass_hz < 0.5 * c.rate_hz * c.oversample,
              "lowpass_hz must stay below the plant's Nyquist frequency, rate_hz * oversample / 2"),
+            ("full_vehicle", lambda c: c.full_vehicle is None or (c.model == "full" and isinstance(
+                c.full_vehicle, FullVehicle)), "is the full car's: a FullVehicle, with model full"),
+            ("vehicle", lambda c: c.model == "half" or c.vehicle == Vehicle(),
+             "is the half car's; with model full the plant is full_vehicle"),
+            ("departures", lambda c: c.model == "half"
+             or dataclasses.replace(c.departures, lowpass_hz=0.0) == Departures(),
+             "with model full only lowpass_hz is simulated (the other departures are the half car's)"),
+            ("bias_mps2", lambda c: c.model == "half" or c.bias_mps2 == (0.0, 0.0),
+             "the full car's accelerometers take no bias: must be (0, 0) with model full"),
         ))
 
     @property
     def speed_mps(self) -> float:
         return self.speed_kmh / 3.6
+
+    @property
+    def plant_vehicle(self) -> Vehicle | FullVehicle:
+        """The simulated vehicle (the truth): ``vehicle``, or with model full ``full_vehicle``."""
+        if self.model == "full":
+            return self.full_vehicle if self.full_vehicle is not None else FullVehicle()
+        return self.vehicle
+
+    @property
+    def channels(self) -> tuple[str, ...]:
+        """The accelerometers, in the order of a block's columns."""
+        return CORNERS if self.model == "full" else HALF_CHANNELS
+
+    @property
+    def n_state(self) -> int:
+        """Length of the plant's physical state ``[q, q']``."""
+        return fullcar.N_STATE if self.model == "full" else N_STATE
 
     @property
     def oversample(self) -> int:
@@ -83,37 +127,58 @@ class SimBlock:
     """Consecutive accelerometer samples of a run."""
 
     t_s: np.ndarray  # (n,) time since the run started
-    accel_mps2: np.ndarray  # (n, 2) front/rear vertical specific force
+    accel_mps2: np.ndarray  # (n, channels) vertical specific force: front/rear, or FL, FR, RL, RR
     speed_mps: np.ndarray  # (n,) vehicle speed
+    channels: tuple[str, ...] = HALF_CHANNELS  # the columns of accel_mps2
 
 
 class Simulation:
-    """A run of the half car over a road, produced block by block."""
+    """A run of the half car (or the full car) over a road, produced block by block."""
 
     def __init__(self, config: SimConfig) -> None:
         self.config = config
         cfg = config
         self._dt = 1.0 / (cfg.rate_hz * cfg.oversample)
-        self._wheelbase = cfg.vehicle.wheelbase_m
+        vehicle = cfg.plant_vehicle
+        self._wheelbase = vehicle.wheelbase_m
         period = None
         if cfg.duration_s > 0:  # one road period per record, as the thesis' eq 4-7
             period = float(np.diff(self.distance_m(np.array([0.0, cfg.duration_s])))[0])
-        self.road = Road(cfg.road, cfg.seed, period_m=period)
+        self.tracks: RoadTracks | None = None
+        if isinstance(vehicle, FullVehicle):
+            self.tracks = RoadTracks(cfg.road, cfg.seed, vehicle.track_front_m, period_m=period,
+                                     coherence=cfg.track_coherence)
+            self.road = self.tracks.left  # the half car's road of this seed
+        else:
+            self.road = Road(cfg.road, cfg.seed, period_m=period)
         self._noise = np.random.default_rng([cfg.seed, 2])
         self._step = -round(cfg.settle_s / self._dt) if cfg.road.kind != "flat" else 0
         u0 = self._road_at(np.array([self._step]))[0]
-        if cfg.initial_state is not None:
-            x0 = np.asarray(cfg.initial_state, dtype=float)
-        elif cfg.road.kind == "flat":
-            x0 = np.asarray(THESIS_FREE_DECAY_STATE)
+        x0 = self._initial_state(u0)
+        self.plant: HalfCarPlant | fullcar.FullCarPlant
+        if isinstance(vehicle, FullVehicle):
+            self.plant = fullcar.FullCarPlant(vehicle, self._dt, x0=x0, u0=u0)
+            bias: tuple[float, ...] = (0.0,) * len(CORNERS)
         else:
-            x0 = static_state(cfg.vehicle, u0)
-        self.plant = HalfCarPlant(cfg.vehicle, self._dt, x0=x0, u0=u0,
-                                  suspension=cfg.departures.suspension(cfg.vehicle),
-                                  delays_s=cfg.departures.delays_s)
-        self.sensors = Accelerometers(cfg.departures, 1.0 / self._dt, cfg.bias_mps2, cfg.include_gravity)
+            self.plant = HalfCarPlant(cfg.vehicle, self._dt, x0=x0, u0=u0,
+                                      suspension=cfg.departures.suspension(cfg.vehicle),
+                                      delays_s=cfg.departures.delays_s)
+            bias = cfg.bias_mps2
+        self.sensors = Accelerometers(cfg.departures, 1.0 / self._dt, bias, cfg.include_gravity)
         if self._step < 0:
             self._advance(-self._step)
+
+    def _initial_state(self, u0: np.ndarray) -> np.ndarray:
+        """The plant's start: ``initial_state``, the thesis' free decay on a flat road, else at rest."""
+        cfg = self.config
+        vehicle = cfg.plant_vehicle
+        if cfg.initial_state is not None:
+            return np.asarray(cfg.initial_state, dtype=float)
+        if cfg.road.kind == "flat":
+            return np.asarray(FULL_FREE_DECAY_STATE if cfg.model == "full" else THESIS_FREE_DECAY_STATE)
+        if isinstance(vehicle, FullVehicle):
+            return fullcar.static_state(vehicle, u0)
+        return static_state(vehicle, u0)
 
     @property
     def time_s(self) -> float:
@@ -137,8 +202,11 @@ class Simulation:
         return cfg.speed_mps * (1.0 + cfg.speed_variation * np.sin(w * t))
 
     def _road_at(self, steps: np.ndarray) -> np.ndarray:
-        """(n, 2) front/rear road height at plant steps."""
+        """(n, 2) front/rear road height at plant steps; the full car's (n, 4) FL, FR, RL, RR: the
+        rear wheels in the front ones' tracks, a wheelbase behind."""
         s_rear = self.distance_m(steps * self._dt)
+        if self.tracks is not None:
+            return np.hstack([self.tracks.heights(s_rear + self._wheelbase), self.tracks.heights(s_rear)])
         return np.column_stack(
             [self.road.heights(s_rear + self._wheelbase), self.road.heights(s_rear)]
         )
@@ -158,8 +226,8 @@ class Simulation:
         t = self.time_s + np.arange(n) / cfg.rate_hz
         accel = self.sensors.read(self._advance(n * cfg.oversample)[:: cfg.oversample])
         if cfg.noise_std_mps2 > 0:
-            accel = accel + cfg.noise_std_mps2 * self._noise.standard_normal((n, 2))
-        return SimBlock(t_s=t, accel_mps2=accel, speed_mps=self.speed_at(t))
+            accel = accel + cfg.noise_std_mps2 * self._noise.standard_normal((n, len(cfg.channels)))
+        return SimBlock(t_s=t, accel_mps2=accel, speed_mps=self.speed_at(t), channels=cfg.channels)
 
     def run(self, duration_s: float) -> SimBlock:
         """The next ``duration_s`` of samples in one block."""
