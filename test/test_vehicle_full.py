@@ -113,3 +113,7 @@ def test_full_tolerances_extend_the_half_cars():
     assert tol.half_car() == Tolerances.from_mapping({"sensor_gain_front": 0.01})
     with pytest.raises(ConfigError, match="unknown tolerance"):
         Tolerances.from_mapping({"track_rear_m": 0.003})  # the half car's stay its own
+
+
+def test_repo_config_is_the_default_full_car():
+    assert load_full_vehicle(ROOT / "config" / "vehicle_full.yaml") == FullVehicle()
