@@ -27,21 +27,21 @@ def correlation_sums(y: np.ndarray, max_lag: int, n_blocks: int = 1) -> np.ndarr
     """Lagged products summed per block of start times.
 
     Args:
-        y: (n_samples, 2) demeaned signals (front, rear).
+        y: (n_samples, m) demeaned signals (front, rear; or a full car's four corners).
         max_lag: largest lag [samples].
         n_blocks: split the start times ``t`` into this many contiguous blocks.
 
     Returns:
-        (n_blocks, max_lag + 1, 2, 2) array ``S[b, tau, i, j] = sum over t in block b
+        (n_blocks, max_lag + 1, m, m) array ``S[b, tau, i, j] = sum over t in block b
         (with t + tau < n) of y[t + tau, i] * y[t, j]``. Summed over blocks it is the
         full-record correlation sum.
     """
-    n = y.shape[0]
+    n, m = y.shape
     bounds = block_bounds(n, n_blocks)
     longest = int(np.max(np.diff(bounds)))
     nfft = sfft.next_fast_len(longest + max_lag, real=True)
-    lead = np.zeros((n_blocks, nfft, 2))  # y[t + tau]: the block and max_lag after it
-    base = np.zeros((n_blocks, nfft, 2))  # y[t]: the block only
+    lead = np.zeros((n_blocks, nfft, m))  # y[t + tau]: the block and max_lag after it
+    base = np.zeros((n_blocks, nfft, m))  # y[t]: the block only
     for b in range(n_blocks):
         a, e = bounds[b], bounds[b + 1]
         ext = y[a : min(e + max_lag, n)]

@@ -1,7 +1,7 @@
 """Modal identification from free decays (thesis sections 2-2 and 2-3).
 
 The identification step is pluggable: an identifier maps free-decay sequences to
-candidate modes; :func:`select_body_modes` then keeps the two body modes. The thesis'
+candidate modes; :func:`select_body_modes` then keeps the body modes (two; a full car's three). The thesis'
 method is :func:`state_transition_modes` (Zhang & Hayama's state variable method).
 """
 
@@ -23,12 +23,12 @@ class Mode:
     """One identified mode.
 
     ``eigenvalue`` is the s-plane pole [rad/s] with positive imaginary part; ``shape``
-    the (front, rear) complex amplitudes at the sensors on a common scale, largest
-    component 1; ``amplitude`` its share of the initial free-decay amplitude.
+    the complex amplitudes at the sensors (front, rear; a full car's four corners) on a
+    common scale, largest component 1; ``amplitude`` its share of the initial free-decay amplitude.
     """
 
     eigenvalue: complex
-    shape: tuple[complex, complex]
+    shape: tuple[complex, ...]
     amplitude: float
 
     @property
@@ -50,7 +50,7 @@ def state_transition_modes(decays: np.ndarray, dt_s: float, p_blocks: int) -> li
 
     Args:
         decays: (batch, n_refs, n_lags, m) free-decay sequences; each batch item is
-            identified on its own from its ``n_refs`` decays (m = 2 channels).
+            identified on its own from its ``n_refs`` decays (m channels).
         dt_s: sample interval T [s].
         p_blocks: pseudo-measurement blocks p (eq 2-5); the state is ``m * p`` long.
 
@@ -93,7 +93,7 @@ def state_transition_modes(decays: np.ndarray, dt_s: float, p_blocks: int) -> li
         modes = []
         for j in range(poles.size):
             shape = shapes[:, j] / shapes[np.argmax(np.abs(shapes[:, j])), j]
-            modes.append(Mode(complex(poles[j]), (complex(shape[0]), complex(shape[1])), float(amp[j])))
+            modes.append(Mode(complex(poles[j]), tuple(complex(c) for c in shape), float(amp[j])))
         out.append(modes)
     return out
 
@@ -105,7 +105,7 @@ def select_body_modes(
     n_modes: int = 2,
     near: Sequence[Mode] | None = None,
 ) -> list[Mode]:
-    """The body's bounce and pitch modes among identified modes.
+    """The body's modes among identified modes (bounce and pitch; a full car's roll too).
 
     Keeps modes with natural frequency and damping ratio inside the bands (the thesis'
     noise-mode filter). When more remain: the ``n_modes`` that carry the most

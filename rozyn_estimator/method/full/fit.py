@@ -1,0 +1,147 @@
+"""Inertial parameters of the full car from its three identified body modes (the thesis'
+section 2-4, carried from the half car to the whole body).
+
+The body is rigid with three degrees of freedom at its centre of gravity, ``q = (z, φ, θ)``
+(heave, pitch nose up, roll left side up; :mod:`rozyn_estimator.vehicle_full`), and mass
+matrix ``diag(m, I_yy, I_xx)``. A corner at ``(x_i, y_i)`` moves
+``z_i = z + (l_f - x_i) φ + (y_i - y_c) θ`` (``T q``), and the corners push on it with
+``F = -Z(s) z_c``: each corner's suspension in series with its tyre (and its unsprung mass
+for ``condensed``), the anti-roll bars coupling an axle's two corners — a 4×4 dynamic
+stiffness (:func:`corner_stiffness`). A mode ``(s, z_c)`` then satisfies
+``s² z_c = -G Z(s) z_c`` with ``G = T diag(m, I_yy, I_xx)⁻¹ Tᵀ`` (the half car's
+eq 2-27 with ``M⁻¹`` seen at the corners), and every entry of ``G`` is linear in
+
+    u = (1/m + l_f²/I_yy + y_c²/I_xx, l_f/I_yy, 1/I_yy, y_c/I_xx, 1/I_xx):
+
+``G_ij = u₁ - u₂ (x_i + x_j) + u₃ x_i x_j - u₄ (y_i + y_j) + u₅ y_i y_j``. So, as for the
+half car, the least-squares fit is one linear solve (no start point, no local minima),
+and ``u`` maps one-to-one to ``(m, I_xx, I_yy, l_f, y_c)``.
+
+The corners' motion in a mode comes from the sensors' by the rigid body: the plane
+``z(x, y) = a + b x + c y`` through three or four sensors (least squares with four),
+evaluated at the wheels — geometry only, no inertial parameter enters.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from rozyn_estimator.method.fit import STIFFNESS_MODELS
+from rozyn_estimator.method.identification import IdentificationError, Mode
+from rozyn_estimator.vehicle_full import FullVehicle
+
+FULL_PARAM_NAMES = ("mass_kg", "roll_inertia_kgm2", "pitch_inertia_kgm2", "cog_from_front_axle_m",
+                    "cog_lateral_m")
+"""The full car's estimated parameters, in the order of its estimates and covariance."""
+
+
+def _axle_bars(v: FullVehicle) -> np.ndarray:
+    """(4, 4) the anti-roll bars as springs between an axle's two corners' deflections [N/m]:
+    a bar of roll stiffness K [N m/rad] on track t is K/t² (vehicle_full's docstring)."""
+    out = np.zeros((4, 4))
+    for (left, right), bar, track in (((0, 1), v.anti_roll_stiffness_front_nmprad, v.track_front_m),
+                                      ((2, 3), v.anti_roll_stiffness_rear_nmprad, v.track_rear_m)):
+        k = bar / track**2
+        out[np.ix_([left, right], [left, right])] += k * np.array([[1.0, -1.0], [-1.0, 1.0]])
+    return out
+
+
+def _series(v: FullVehicle, s: complex, unsprung: bool) -> np.ndarray:
+    """(4, 4) the corners' dynamic stiffness at ``s``: suspension (with the bars) between body
+    and wheel, tyre between wheel and road; the wheel condensed out (with its mass when
+    ``unsprung``): ``Z = Z_s - Z_s (Z_s + Z_t + m_t s²)⁻¹ Z_s``."""
+    zs = np.diag(np.asarray(v.suspension_stiffness_npm) + s * np.asarray(v.suspension_damping_nspm)) \
+        + _axle_bars(v)
+    zt = np.diag(np.asarray(v.tyre_stiffness_npm) + s * np.asarray(v.tyre_damping_nspm))
+    if unsprung:
+        zt = zt + np.diag(np.asarray(v.unsprung_mass_kg) * s * s)
+    return zs - zs @ np.linalg.solve(zs + zt, zs)
+
+
+def corner_stiffness(v: FullVehicle, s: complex, model: str) -> np.ndarray:
+    """(4, 4) complex dynamic stiffness of the corners at pole ``s`` [N/m], the half car's
+    three models (:mod:`rozyn_estimator.method.fit`) in matrix form:
+
+    - ``eq2-21``: the static series connection ``K(0) + s C(0)`` (``C`` its slope at rest);
+    - ``eq2-22``: the series connection at the mode's natural frequency ``ω = |s|``,
+      ``Re Z(iω) + s Im Z(iω)/ω``;
+    - ``condensed``: the exact dynamic condensation of the unsprung masses at ``s``.
+    """
+    if model not in STIFFNESS_MODELS:
+        raise ValueError(f"unknown stiffness model {model!r}; choose from {', '.join(STIFFNESS_MODELS)}")
+    if model == "condensed":
+        return _series(v, s, unsprung=True)
+    if model == "eq2-21":
+        h = 1e-3  # rad/s: the slope at rest by a central difference on the imaginary axis
+        z0 = _series(v, 0.0, unsprung=False).real
+        slope = (_series(v, 1j * h, unsprung=False) - _series(v, -1j * h, unsprung=False)).imag / (2 * h)
+        return z0 + s * slope
+    w = abs(s)
+    z = _series(v, 1j * w, unsprung=False)
+    return z.real + s * z.imag / w
+
+
+def plane_map(points_x_m: Sequence[float], points_y_m: Sequence[float], v: FullVehicle) -> np.ndarray:
+    """(4, n) map from the vertical motion of ``n`` body points (three or four, not on one
+    line) to the corners' (FL, FR, RL, RR), by the rigid body's plane."""
+    pts = np.column_stack([np.ones(len(points_x_m)), points_x_m, points_y_m])
+    if pts.shape[0] < 3 or np.linalg.matrix_rank(pts, tol=1e-6 * max(1.0, float(np.abs(pts).max()))) < 3:
+        raise IdentificationError("full car: the accelerometers must be three or four points not on one line")
+    corners = np.column_stack([np.ones(4), v.corner_x_m, v.corner_y_m])
+    return corners @ np.linalg.pinv(pts)
+
+
+def corner_shapes(v: FullVehicle, modes: Sequence[Mode], sensors: Sequence[int]) -> np.ndarray:
+    """(4, n_modes) complex mode shapes at the corners, each of unit norm, from the shapes
+    at the accelerometers ``sensors`` (indices into the vehicle's FL, FR, RL, RR sensors)."""
+    xs = [v.sensor_x_m[i] for i in sensors]
+    ys = [v.sensor_y_m[i] for i in sensors]
+    shapes = plane_map(xs, ys, v) @ np.array([md.shape for md in modes]).T
+    return shapes / np.linalg.norm(shapes, axis=0)
+
+
+def fit_full_inertia(v: FullVehicle, modes: Sequence[Mode], sensors: Sequence[int],
+                     model: str = "eq2-22") -> np.ndarray:
+    """Least-squares ``(m [kg], I_xx [kg m²], I_yy [kg m²], l_f [m], y_c [m])`` from the three
+    identified body modes (heave, pitch and roll, in any order).
+
+    Raises:
+        IdentificationError: the fit lands outside the physical range.
+    """
+    x = np.asarray(v.corner_x_m)
+    y = np.asarray(v.corner_y_m)
+    shapes = corner_shapes(v, modes, sensors)
+    rows, target = [], []
+    for j, md in enumerate(modes):
+        s = md.eigenvalue
+        zc = shapes[:, j]
+        f = corner_stiffness(v, s, model) @ zc  # the corners' forces on the body, per unit amplitude
+        total, fx, fy = f.sum(), x @ f, y @ f
+        # -(G f)_i = s² z_i, linear in u (module docstring)
+        rows.append(np.column_stack([np.full(4, total), -(x * total + fx), x * fx, -(y * total + fy),
+                                     y * fy]))
+        target.append(-(s * s) * zc)
+    design = np.vstack(rows)
+    rhs = np.concatenate(target)
+    u, *_ = np.linalg.lstsq(np.vstack([design.real, design.imag]), np.concatenate([rhs.real, rhs.imag]),
+                            rcond=None)
+    return _physical(u, v)
+
+
+def _physical(u: np.ndarray, v: FullVehicle) -> np.ndarray:
+    """``(m, I_xx, I_yy, l_f, y_c)`` from ``u``; IdentificationError outside the physical range."""
+    u1, u2, u3, u4, u5 = u
+    if not (np.all(np.isfinite(u)) and u3 > 0 and u5 > 0):
+        raise IdentificationError(
+            f"full-car fit outside the physical range (1/I_yy = {u3:.3g}, 1/I_xx = {u5:.3g})")
+    lf, yc = u2 / u3, u4 / u5
+    inv_m = u1 - lf * lf * u3 - yc * yc * u5
+    half_track = 0.5 * max(v.track_front_m, v.track_rear_m)
+    if not (0 < lf < v.wheelbase_m and abs(yc) < half_track and inv_m > 0):
+        raise IdentificationError(
+            f"full-car fit outside the physical range (lf = {lf:.3g} m, lateral CoG = {yc:.3g} m, "
+            f"1/m = {inv_m:.3g})"
+        )
+    return np.array([1.0 / inv_m, 1.0 / u5, 1.0 / u3, lf, yc])

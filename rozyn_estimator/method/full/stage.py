@@ -1,0 +1,184 @@
+"""Rozyn's pipeline on the full car: three or four corner accelerometers in, ``(m, I_xx, I_yy,
+l_f, y_c)`` and their jackknife covariance out.
+
+The half car's steps (:mod:`rozyn_estimator.method.pipeline`) on more channels: the
+multi-reference correlation functions of every channel pair (section 2-1), the state
+transition matrix's modes (2-2, 2-3), the three body modes (heave, pitch, roll) by the
+frequency and damping bands and their amplitude, the linear fit of
+:mod:`rozyn_estimator.method.full.fit`, and the delete-one-block jackknife. The likelihood
+refinement of the full car is not part of this stage.
+
+A failure at any step is a ``failed`` status with a reason, never an exception and never a
+number.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from rozyn_estimator.method.config import PipelineConfig
+from rozyn_estimator.method.correlation import correlation_sums
+from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES, fit_full_inertia
+from rozyn_estimator.method.glitches import GlitchError, gate_glitches
+from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
+from rozyn_estimator.method.variance import jackknife_covariance
+from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
+
+N_DOF_FULL = 7  # eq 2-4's n for the full car: body heave, pitch, roll and four wheels
+N_BODY_MODES = 3
+
+
+@dataclass(frozen=True)
+class FullEstimate:
+    """One full-car update. ``params``/``covariance`` are None unless status is ok."""
+
+    status: str  # "ok" | "failed"
+    reason: str = ""
+    params: np.ndarray | None = None  # (5,) in FULL_PARAM_NAMES order
+    covariance: np.ndarray | None = None  # (5, 5), same order
+    modes: tuple[Mode, ...] = ()  # heave, pitch and roll, by frequency
+    sensors: tuple[str, ...] = ()  # the corners whose accelerometers the columns were
+    n_samples: int = 0
+    elapsed_ms: float = 0.0
+    notes: tuple[str, ...] = ()
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    @property
+    def std(self) -> np.ndarray | None:
+        return None if self.covariance is None else np.sqrt(np.diag(self.covariance))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: the values by name, the covariance with its labelled layout."""
+        out: dict[str, Any] = {"status": self.status, "reason": self.reason, "stage": "rozyn",
+                               "n_samples": self.n_samples, "elapsed_ms": self.elapsed_ms,
+                               "sensors": list(self.sensors), "notes": list(self.notes)}
+        for i, name in enumerate(FULL_PARAM_NAMES):
+            out[name] = None if self.params is None else float(self.params[i])
+        out["covariance_layout"] = list(FULL_PARAM_NAMES)
+        out["covariance"] = None if self.covariance is None else self.covariance.tolist()
+        out["modes"] = [{"freq_hz": md.freq_hz, "damping_ratio": md.damping_ratio} for md in self.modes]
+        return out
+
+
+class _InputError(Exception):
+    """The window cannot be used (becomes a failed status)."""
+
+
+def estimate_full(
+    accel_mps2: np.ndarray,
+    fs_hz: float,
+    vehicle: FullVehicle,
+    config: PipelineConfig | None = None,
+    speed_mps: float | None = None,
+    sensors: Sequence[str] = CORNERS,
+) -> FullEstimate:
+    """Rozyn's stage of the full car on one window.
+
+    Args:
+        accel_mps2: (n_samples, k) vertical accelerations of ``k`` = 3 or 4 body points on a
+            uniform grid (gravity may be included: the mean is removed).
+        fs_hz: sample rate [Hz].
+        vehicle: the known suspension, tyres, anti-roll bars and geometry, and where each
+            accelerometer sits (its inertial values are not used).
+        config: the pipeline's settings (bands, lags, stiffness model, jackknife).
+        speed_mps: the vehicle's speed [m/s] when known: the correlation lags shorter than
+            the wheelbase delay are skipped (the rear wheels repeat the front ones' road).
+        sensors: the corner (``front_left`` …) of each column's accelerometer.
+    """
+    cfg = config or PipelineConfig()
+    started = time.perf_counter()
+    accel = np.asarray(accel_mps2)
+    n = int(accel.shape[0]) if accel.ndim >= 1 else 0
+    try:
+        index = _sensor_indices(sensors)
+        y = _checked(accel, fs_hz, cfg, tuple(sensors))
+        params, cov, modes, notes = _identify(y, fs_hz, vehicle, cfg, speed_mps, index)
+    except (_InputError, IdentificationError, np.linalg.LinAlgError) as exc:
+        return FullEstimate(status="failed", reason=str(exc), n_samples=n, sensors=tuple(sensors),
+                            elapsed_ms=(time.perf_counter() - started) * 1e3)
+    return FullEstimate(status="ok", params=params, covariance=cov, modes=modes, sensors=tuple(sensors),
+                        n_samples=n, elapsed_ms=(time.perf_counter() - started) * 1e3, notes=notes)
+
+
+def _sensor_indices(sensors: Sequence[str]) -> tuple[int, ...]:
+    unknown = [s for s in sensors if s not in CORNERS]
+    if unknown or len(set(sensors)) != len(sensors) or len(sensors) not in (3, 4):
+        raise _InputError(f"full car: sensors must be 3 or 4 distinct corners of {', '.join(CORNERS)}; "
+                          f"got {', '.join(sensors) or 'none'}")
+    return tuple(CORNERS.index(s) for s in sensors)
+
+
+def _checked(accel: np.ndarray, fs_hz: float, cfg: PipelineConfig, names: tuple[str, ...]) -> np.ndarray:
+    """The window demeaned, with glitches gated."""
+    if not (isinstance(fs_hz, int | float) and math.isfinite(fs_hz) and fs_hz > 0):
+        raise _InputError(f"sample rate must be a positive number, got {fs_hz!r}")
+    if accel.ndim != 2 or accel.shape[1] != len(names):
+        raise _InputError(f"expected accelerations of shape (n, {len(names)}), got {accel.shape}")
+    if not np.issubdtype(accel.dtype, np.number) or np.iscomplexobj(accel):
+        raise _InputError(f"expected real numbers, got dtype {accel.dtype}")
+    y = accel.astype(float, copy=False)
+    if not np.all(np.isfinite(y)):
+        raise _InputError(f"{int(np.sum(~np.isfinite(y)))} samples are NaN or Inf")
+    if y.shape[0] < cfg.min_duration_s * fs_hz:
+        raise _InputError(f"window too short: {y.shape[0] / fs_hz:.2f} s < {cfg.min_duration_s:g} s")
+    try:
+        y, _ = gate_glitches(y, names)
+    except GlitchError as exc:
+        raise _InputError(str(exc)) from None
+    y = y - y.mean(axis=0)
+    for i, name in enumerate(names):
+        if not np.any(np.abs(y[:, i]) > 1e-9):
+            raise _InputError(f"{name} channel is constant: no vibration to identify")
+    return y
+
+
+def _identify(
+    y: np.ndarray, fs_hz: float, v: FullVehicle, cfg: PipelineConfig, speed_mps: float | None,
+    index: tuple[int, ...],
+) -> tuple[np.ndarray, np.ndarray | None, tuple[Mode, ...], tuple[str, ...]]:
+    """(params, jackknife covariance or None, the body modes, notes); raises on failure."""
+    n, dt = y.shape[0], 1.0 / fs_hz
+    first_s = cfg.min_lag_s
+    if cfg.skip_wheelbase_delay and speed_mps is not None and speed_mps > 0:
+        first_s = max(first_s, v.wheelbase_m / speed_mps)
+    first = max(1, math.ceil(first_s * fs_hz - 1e-9))  # lag 0 carries the sensor noise variance
+    last = first + round(cfg.max_lag_s * fs_hz)
+    jackknife = cfg.variance == "jackknife"
+    blocks = cfg.jackknife_blocks if jackknife else 1
+    if n < blocks * (last + 1) or n < 4 * (last + 1):
+        raise _InputError(f"window too short for {cfg.max_lag_s:g} s of correlation lags in {blocks} blocks: "
+                          f"{n / fs_hz:.1f} s")
+    sums = correlation_sums(y, last, blocks)
+    total = sums.sum(axis=0)
+    records = [total] + ([total - sums[b] for b in range(blocks)] if jackknife else [])
+    # reference j: [R_0j(tau), ..., R_kj(tau)] (multi-reference free decays)
+    decays = np.stack([r[first:].transpose(2, 0, 1) for r in records])
+    p_blocks = math.ceil(cfg.gamma * 2 * max(cfg.n_dof, N_DOF_FULL) / y.shape[1])  # eq 2-5
+    identified = IDENTIFIERS[cfg.identifier](decays, dt, p_blocks)
+    body = select_body_modes(identified[0], cfg.freq_band_hz, cfg.damping_band, n_modes=N_BODY_MODES)
+    params = fit_full_inertia(v, body, index, cfg.stiffness_model)
+    if not jackknife:
+        return params, None, tuple(body), ()
+    replicates = np.full((blocks, params.size), np.nan)
+    for b, modes in enumerate(identified[1:]):
+        try:
+            near = select_body_modes(modes, cfg.freq_band_hz, cfg.damping_band, n_modes=N_BODY_MODES,
+                                     near=body)
+            replicates[b] = fit_full_inertia(v, near, index, cfg.stiffness_model)
+        except (IdentificationError, np.linalg.LinAlgError):
+            pass
+    cov, good = jackknife_covariance(replicates, params)
+    if cov is None:
+        raise IdentificationError(f"unstable identification: only {good} of {blocks} jackknife replicates "
+                                  "found the modes")
+    notes = () if good == blocks else (f"{blocks - good} of {blocks} jackknife replicates failed",)
+    return params, cov, tuple(body), notes
