@@ -145,3 +145,36 @@ def test_sensors_that_cannot_see_roll_are_refused_by_the_vehicle():
 
     with pytest.raises(ConfigError, match="sensor_y_m"):
         FullVehicle(sensor_x_m=(0.0, 1.0, 2.0, 2.8), sensor_y_m=(0.0, 0.0, 0.0, 0.0))
+
+
+def _driven(v: FullVehicle, seed: int = 3) -> np.ndarray:
+    sim = Simulation(SimConfig(model="full", full_vehicle=v, road=RoadSpec(amplitudes="gaussian"), seed=seed))
+    return sim.run(120.0).accel_mps2
+
+
+def test_the_budget_adds_each_tolerance_as_its_effect_on_the_fit():
+    """The published covariance is the jackknife's plus every tolerance's contribution, and a
+    contribution is the fit's response to that value moved by its tolerance (here checked
+    against refitting with the tyres 10 % stiffer, to first order)."""
+    from rozyn_estimator.vehicle_full import FullTolerances
+
+    v = FullVehicle(cog_lateral_m=0.05, anti_roll_stiffness_front_nmprad=5000.0)
+    y = _driven(v)
+    est = estimate_full(y, 100.0, v, PipelineConfig(refine="none"), 100 / 3.6)
+    assert est.ok and est.budget is not None
+    assert est.covariance == pytest.approx(est.budget.statistical + est.budget.systematic)
+    labels = {name for i in range(5) for name, _ in est.budget.by_group(i)}
+    assert {"statistics", "tyre stiffness", "tracks", "anti-roll bars", "sensor positions"} <= labels
+    tyre = est.budget.contributions["tyre_stiffness_front_npm"]
+    stiffer = v.replace(tyre_stiffness_npm=(1.1e5, 1.1e5, 1e5, 1e5))
+    refit = fit_full_inertia(stiffer, est.modes, (0, 1, 2, 3))
+    assert tyre == pytest.approx(refit - est.params, rel=0.1, abs=1e-6)
+    # the track tolerance acts on the roll inertia and not much on the pitch inertia
+    track = est.budget.contributions["track_front_m"]
+    assert abs(track[1]) / v.roll_inertia_kgm2 > 10 * abs(track[2]) / v.pitch_inertia_kgm2
+    # without tolerances: the jackknife alone
+    exact = v.replace(tolerances=FullTolerances(**{k: 0.0 for k in FullTolerances().to_dict()}))
+    alone = estimate_full(y, 100.0, exact, PipelineConfig(refine="none"), 100 / 3.6)
+    assert alone.budget is None
+    assert alone.covariance == pytest.approx(est.budget.statistical)
+    assert np.all(np.diag(est.covariance) > np.diag(alone.covariance))

@@ -5,8 +5,9 @@ The half car's steps (:mod:`rozyn_estimator.method.pipeline`) on more channels: 
 multi-reference correlation functions of every channel pair (section 2-1), the state
 transition matrix's modes (2-2, 2-3), the three body modes (heave, pitch, roll) by the
 frequency and damping bands and their amplitude, the linear fit of
-:mod:`rozyn_estimator.method.full.fit`, and the delete-one-block jackknife. The likelihood
-refinement of the full car is not part of this stage.
+:mod:`rozyn_estimator.method.full.fit`, the delete-one-block jackknife, and the tolerances'
+contributions (:mod:`rozyn_estimator.method.full.budget`): the published covariance is the
+jackknife's plus theirs. The likelihood refinement of the full car is not part of this stage.
 
 A failure at any step is a ``failed`` status with a reason, never an exception and never a
 number.
@@ -24,6 +25,7 @@ import numpy as np
 
 from rozyn_estimator.method.config import PipelineConfig
 from rozyn_estimator.method.correlation import correlation_sums
+from rozyn_estimator.method.full.budget import FullBudget, full_contributions
 from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES, fit_full_inertia
 from rozyn_estimator.method.glitches import GlitchError, gate_glitches
 from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
@@ -41,12 +43,13 @@ class FullEstimate:
     status: str  # "ok" | "failed"
     reason: str = ""
     params: np.ndarray | None = None  # (5,) in FULL_PARAM_NAMES order
-    covariance: np.ndarray | None = None  # (5, 5), same order
+    covariance: np.ndarray | None = None  # (5, 5), same order: the budget's total
     modes: tuple[Mode, ...] = ()  # heave, pitch and roll, by frequency
     sensors: tuple[str, ...] = ()  # the corners whose accelerometers the columns were
     n_samples: int = 0
     elapsed_ms: float = 0.0
     notes: tuple[str, ...] = ()
+    budget: FullBudget | None = None  # the covariance's statistical and systematic parts
 
     @property
     def ok(self) -> bool:
@@ -66,6 +69,8 @@ class FullEstimate:
         out["covariance_layout"] = list(FULL_PARAM_NAMES)
         out["covariance"] = None if self.covariance is None else self.covariance.tolist()
         out["modes"] = [{"freq_hz": md.freq_hz, "damping_ratio": md.damping_ratio} for md in self.modes]
+        if self.budget is not None:
+            out["budget"] = self.budget.to_dict()
         return out
 
 
@@ -105,8 +110,13 @@ def estimate_full(
     except (_InputError, IdentificationError, np.linalg.LinAlgError) as exc:
         return FullEstimate(status="failed", reason=str(exc), n_samples=n, sensors=tuple(sensors),
                             elapsed_ms=(time.perf_counter() - started) * 1e3)
+    budget = None
+    if cov is not None and vehicle.tolerances.any:
+        budget = FullBudget(cov, full_contributions(vehicle, modes, index, params, cfg.stiffness_model))
+        cov = budget.total
     return FullEstimate(status="ok", params=params, covariance=cov, modes=modes, sensors=tuple(sensors),
-                        n_samples=n, elapsed_ms=(time.perf_counter() - started) * 1e3, notes=notes)
+                        n_samples=n, elapsed_ms=(time.perf_counter() - started) * 1e3, notes=notes,
+                        budget=budget)
 
 
 def _sensor_indices(sensors: Sequence[str]) -> tuple[int, ...]:

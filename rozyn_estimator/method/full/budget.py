@@ -1,0 +1,141 @@
+"""The full car's uncertainty budget for Rozyn's stage: the jackknife's statistical part and
+what every toleranced value contributes (GUM type B), as :mod:`rozyn_estimator.method.budget`
+does for the half car: the linear fit repeated on the same measured modes with the value
+moved a small step, times its tolerance.
+
+The full car's tolerances (:class:`~rozyn_estimator.vehicle_full.FullTolerances`) are the
+half car's per axle (a share applies to both corners of that axle; a sensor offset to the
+``x`` of that axle's sensors) plus the tracks, the anti-roll bars and the sensors' lateral
+positions (each sensor's on its own: independent errors, one contribution each).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from rozyn_estimator.method.budget import GROUPS, STATISTICS
+from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES, fit_full_inertia
+from rozyn_estimator.method.identification import IdentificationError, Mode
+from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
+
+_REL_STEP = 1e-5  # share of a value
+_ABS_STEP = 1e-6  # m, s or share of a gain
+_GROUPS = {**GROUPS, "track": "tracks", "anti_roll": "anti-roll bars", "sensor_lateral": "sensor positions"}
+_QUADS = {"suspension_stiffness": "suspension_stiffness_npm", "suspension_damping": "suspension_damping_nspm",
+          "tyre_stiffness": "tyre_stiffness_npm", "tyre_damping": "tyre_damping_nspm",
+          "unsprung_mass": "unsprung_mass_kg"}
+_AXLE = {"front": (0, 1), "rear": (2, 3)}
+
+
+@dataclass(frozen=True)
+class FullBudget:
+    """The statistical covariance and the systematic contributions of one full-car estimate."""
+
+    statistical: np.ndarray  # (5, 5) in FULL_PARAM_NAMES order
+    contributions: dict[str, np.ndarray] = field(default_factory=dict)  # key -> (5,) shift per 1 u
+
+    @property
+    def systematic(self) -> np.ndarray:
+        out = np.zeros((5, 5))
+        for c in self.contributions.values():
+            out += np.outer(c, c)
+        return out
+
+    @property
+    def total(self) -> np.ndarray:
+        return self.statistical + self.systematic
+
+    def by_group(self, i: int) -> list[tuple[str, float]]:
+        """(contributor, std) for parameter ``i``, largest first, statistics included."""
+        groups: dict[str, float] = {STATISTICS: float(self.statistical[i, i])}
+        for key, c in self.contributions.items():
+            label = next(v for k, v in _GROUPS.items() if key.startswith(k))
+            groups[label] = groups.get(label, 0.0) + float(c[i]) ** 2
+        return sorted(((k, math.sqrt(max(v, 0.0))) for k, v in groups.items()), key=lambda kv: -kv[1])
+
+    def to_dict(self) -> dict[str, object]:
+        return {"statistical": self.statistical.tolist(), "systematic": self.systematic.tolist(),
+                "contributors": {name: dict(self.by_group(i)) for i, name in enumerate(FULL_PARAM_NAMES)}}
+
+
+def full_contributions(v: FullVehicle, modes: Sequence[Mode], sensors: Sequence[int], params: np.ndarray,
+                       model: str) -> dict[str, np.ndarray]:
+    """Contributions ``c_j`` (5,) of each toleranced value of ``v`` to the fit's estimate."""
+    out = {}
+    for key, tol in v.tolerances.to_dict().items():
+        if tol <= 0:
+            continue
+        for name, step, move in _moves(v, key, sensors):
+            try:
+                vehicle, sensed = move(step)
+                moved = fit_full_inertia(vehicle, [sensed(md) for md in modes], sensors, model)
+            except IdentificationError:  # at the edge of the physical range: the stage's result stands
+                continue
+            out[name] = (moved - params) / step * tol
+    return out
+
+
+Move = Callable[[float], tuple[FullVehicle, Callable[[Mode], Mode]]]
+
+
+def _moves(v: FullVehicle, key: str, sensors: Sequence[int]) -> list[tuple[str, float, Move]]:
+    """(contribution name, step, the vehicle and the sensing with the value moved by the step)."""
+    def same(md: Mode) -> Mode:
+        return md
+
+    def vehicle(**changes: Any) -> tuple[FullVehicle, Callable[[Mode], Mode]]:
+        return dataclasses.replace(v, **changes), same
+
+    def scaled(quad: str, corners: tuple[int, ...], h: float) -> tuple[FullVehicle, Callable[[Mode], Mode]]:
+        values = list(getattr(v, quad))
+        for c in corners:
+            values[c] *= 1.0 + h
+        return vehicle(**{quad: tuple(values)})
+
+    def sensed(corners: tuple[int, ...], factor: Callable[[Mode], complex]) -> Callable[[Mode], Mode]:
+        cols = [j for j, s in enumerate(sensors) if s in corners]
+
+        def apply(md: Mode) -> Mode:
+            shape = list(md.shape)
+            for j in cols:
+                shape[j] *= factor(md)
+            return Mode(md.eigenvalue, tuple(shape), md.amplitude)
+        return apply
+
+    axle = "front" if "_front" in key else "rear"
+    quad = next((q for k, q in _QUADS.items() if key.startswith(k)), None)
+    if quad is not None:
+        return [(key, _REL_STEP, lambda h: scaled(quad, _AXLE[axle], h))]
+    if key.startswith("anti_roll"):
+        bar = getattr(v, key)
+        return [] if bar == 0 else [(key, _REL_STEP, lambda h: vehicle(**{key: bar * (1 + h)}))]
+    if key in ("wheelbase_m", "track_front_m", "track_rear_m"):
+        return [(key, _ABS_STEP, lambda h: vehicle(**{key: getattr(v, key) + h}))]
+    if key in ("sensor_front_offset_m", "sensor_rear_offset_m"):
+        def shifted(h: float) -> tuple[FullVehicle, Callable[[Mode], Mode]]:
+            xs = list(v.sensor_x_m)
+            for c in _AXLE[axle]:
+                xs[c] += h
+            return vehicle(sensor_x_m=tuple(xs))
+        return [(key, _ABS_STEP, shifted)]
+    if key == "sensor_lateral_m":
+        def lateral(c: int) -> Move:
+            def move(h: float) -> tuple[FullVehicle, Callable[[Mode], Mode]]:
+                ys = list(v.sensor_y_m)
+                ys[c] += h
+                return vehicle(sensor_y_m=tuple(ys))
+            return move
+        return [(f"{key}[{CORNERS[c]}]", _ABS_STEP, lateral(c)) for c in sensors]
+    if key.startswith("sensor_gain"):
+        # the estimator undoes the gain it assumes: the measured shape divided by (1 + h)
+        return [(key, _ABS_STEP, lambda h: (v, sensed(_AXLE[axle], lambda md: 1.0 / (1.0 + h))))]
+    if key == "sensor_time_offset_s":  # the rear sensors late by h: their components turned by e^(sh)
+        return [(key, _ABS_STEP,
+                 lambda h: (v, sensed(_AXLE["rear"], lambda md: complex(np.exp(md.eigenvalue * h)))))]
+    return []
