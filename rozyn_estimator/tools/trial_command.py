@@ -44,9 +44,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--noise-std-mps2", type=float, default=0.0, help="white sensor noise (default: 0)")
     p.add_argument("--noise-fraction", type=float, default=0.0, metavar="F",
                    help="white sensor noise as a share of each channel's rms, e.g. 0.1 (default: 0)")
-    p.add_argument("--method", choices=tuple(METHODS), default="likelihood",
+    p.add_argument("--method", choices=tuple(METHODS), default=None,
                    help="estimation method (default: likelihood, the nodes' default: Rozyn's pipeline "
-                        "then the likelihood refinement; rozyn: Rozyn's pipeline alone)")
+                        "then the likelihood refinement; rozyn: Rozyn's pipeline alone; with --model "
+                        "full: rozyn)")
+    p.add_argument("--model", choices=("half", "full"), default="half",
+                   help="half: the half car (front and rear sensors); full: the 7-DOF full car on two road "
+                        "tracks, four corner sensors, estimating roll inertia and lateral CoG too "
+                        "(--vehicle then takes a full-car file; default: half)")
     add_vehicle_option(p)
     add_departure_options(p)
     add_vehicle_error_options(p)
@@ -65,13 +70,18 @@ def trial_spec(args: argparse.Namespace) -> TrialSpec:
         laplace_nu=args.laplace_nu, waviness=args.waviness, speed_kmh=args.speed_kmh,
         duration_s=args.duration_s, rate_hz=args.rate_hz, noise_std_mps2=args.noise_std_mps2,
         noise_fraction=args.noise_fraction,
-        vehicle=load_vehicle(args.vehicle) if args.vehicle else Vehicle(), method=args.method,
+        vehicle=load_vehicle(args.vehicle) if args.vehicle else Vehicle(), method=args.method or "likelihood",
         departures=Departures(**departure_values(args)), **vehicle_error_values(args),
     )
 
 
 def run(args: argparse.Namespace) -> int:
     """``rozyn trial``."""
+    if args.model == "full":
+        from rozyn_estimator.tools import trial_full
+
+        args.method = args.method or "rozyn"
+        return trial_full.run(args)
     spec = trial_spec(args)
     seeds = parse_seeds(args.seeds if args.seeds is not None else str(args.seed))
     results = []

@@ -1,0 +1,56 @@
+"""``rozyn trial --model full``: the full car's seeded trials through the CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from rozyn_estimator.method.full import FULL_PARAM_NAMES
+from rozyn_estimator.tools.cli import main
+
+
+def _records(capsys) -> list[dict]:
+    return [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+
+
+def test_json_carries_the_roll_inertia_and_lateral_cog_with_a_labelled_5x5_covariance(capsys):
+    assert main(["trial", "--model", "full", "--seeds", "1-2", "--json", "--jobs", "1", "--duration-s", "90",
+                 "--amplitudes", "gaussian", "--noise-fraction", "0.1"]) == 0
+    records = _records(capsys)
+    assert [r["seed"] for r in records] == [1, 2]
+    for r in records:
+        assert r["status"] == "ok", r["reason"]
+        assert r["covariance_layout"] == list(FULL_PARAM_NAMES)
+        cov = np.array(r["covariance"])
+        assert cov.shape == (5, 5) and np.all(np.linalg.eigvalsh(cov) > 0)
+        assert r["truth"]["roll_inertia_kgm2"] == 400.0 and r["truth"]["cog_lateral_m"] == 0.0
+        for i, name in enumerate(FULL_PARAM_NAMES):  # within 5 reported std of the truth
+            assert abs(r[name] - r["truth"][name]) < 5 * np.sqrt(cov[i, i]), name
+        assert "sensor positions" in r["budget"]["contributors"]["cog_lateral_m"]
+    assert records[0]["mass_kg"] != records[1]["mass_kg"]  # the seed picks the road
+
+
+def test_a_full_car_vehicle_file_is_the_truth(tmp_path, capsys):
+    path = tmp_path / "car.yaml"
+    path.write_text("vehicle:\n  model: full\n  cog_lateral_m: 0.06\n  roll_inertia_kgm2: 500.0\n")
+    assert main(["trial", "--model", "full", "--vehicle", str(path), "--json", "--duration-s", "90"]) == 0
+    r = _records(capsys)[0]
+    assert r["truth"]["cog_lateral_m"] == 0.06 and r["truth"]["roll_inertia_kgm2"] == 500.0
+    assert r["status"] == "ok" and abs(r["cog_lateral_m"] - 0.06) < 0.1
+
+
+def test_what_the_full_car_cannot_do_yet_is_refused_with_a_reason(capsys):
+    assert main(["trial", "--model", "full", "--method", "likelihood"]) == 1
+    assert "likelihood refinement is not available yet" in capsys.readouterr().err
+    assert main(["trial", "--model", "full", "--method", "thesis"]) == 1
+    assert "the full car has rozyn" in capsys.readouterr().err
+    assert main(["trial", "--model", "full", "--vehicle", "config/vehicle.yaml"]) == 1
+    assert "half-car vehicle file" in capsys.readouterr().err
+
+
+def test_the_table_names_the_five_parameters(capsys):
+    assert main(["trial", "--model", "full", "--seeds", "3-4", "--jobs", "1", "--duration-s", "90"]) == 0
+    out = capsys.readouterr().out
+    for label in ("roll inertia", "pitch inertia", "CoG left of centre", "failures: 0 of 2"):
+        assert label in out
