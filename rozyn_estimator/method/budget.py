@@ -19,6 +19,7 @@ import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
@@ -51,13 +52,20 @@ def group_of(key: str) -> str:
 class Budget:
     """The statistical covariance and the systematic contributions of one estimate."""
 
-    statistical: np.ndarray  # (3, 3)
-    contributions: dict[str, np.ndarray] = field(default_factory=dict)  # key -> (3,) shift per 1 u
+    NAMES: ClassVar[tuple[str, ...]] = PARAM_NAMES  # the estimated parameters, in order
+
+    statistical: np.ndarray  # (k, k), k = len(NAMES)
+    contributions: dict[str, np.ndarray] = field(default_factory=dict)  # key -> (k,) shift per 1 u
     calibration: tuple[Calibration, ...] = ()
+
+    @staticmethod
+    def group(key: str) -> str:
+        """The contributor group a tolerance key belongs to, as a user reads it."""
+        return group_of(key)
 
     @property
     def systematic(self) -> np.ndarray:
-        out = np.zeros((3, 3))
+        out = np.zeros(self.statistical.shape)
         for c in self.contributions.values():
             out += np.outer(c, c)
         return out
@@ -70,7 +78,7 @@ class Budget:
         """(contributor, std) for parameter ``i``, largest first, statistics included."""
         groups: dict[str, float] = {STATISTICS: float(self.statistical[i, i])}
         for key, c in self.contributions.items():
-            groups[group_of(key)] = groups.get(group_of(key), 0.0) + float(c[i]) ** 2
+            groups[self.group(key)] = groups.get(self.group(key), 0.0) + float(c[i]) ** 2
         return sorted(((k, math.sqrt(max(v, 0.0))) for k, v in groups.items()), key=lambda kv: -kv[1])
 
     def text(self, i: int, shown: int = 3) -> str:
@@ -82,7 +90,7 @@ class Budget:
         return {
             "statistical": self.statistical.tolist(),
             "systematic": self.systematic.tolist(),
-            "contributors": {name: dict(self.by_group(i)) for i, name in enumerate(PARAM_NAMES)},
+            "contributors": {name: dict(self.by_group(i)) for i, name in enumerate(self.NAMES)},
             "calibration": [c.to_dict() for c in self.calibration],
         }
 

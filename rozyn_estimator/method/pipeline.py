@@ -36,6 +36,7 @@ from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationErr
 from rozyn_estimator.method.likelihood import Refinement, refine
 from rozyn_estimator.method.variance import jackknife_covariance
 from rozyn_estimator.vehicle import Vehicle
+from rozyn_estimator.vehicle_full import FullVehicle
 
 
 @dataclass(frozen=True)
@@ -148,7 +149,7 @@ def estimate(
     speed, profile = _speed(speed_mps)
     accel = np.asarray(accel_mps2)
     try:
-        y, gated = _checked(accel, fs_hz, cfg)
+        y, gated = checked_window(accel, fs_hz, cfg)
     except InputError as exc:
         return _failed(str(exc), int(accel.shape[0]) if accel.ndim >= 1 else 0, started)
     if cfg.refine == "none":
@@ -189,7 +190,7 @@ def _rozyn_stage(
     """Rozyn's pipeline on the checked, demeaned window."""
     n, dt = int(y.shape[0]), 1.0 / fs_hz
     try:
-        first, last = _lag_range(cfg, fs_hz, vehicle, speed_mps)
+        first, last = lag_range(cfg, fs_hz, vehicle, speed_mps)
         if cfg.correlation == "free-decay":
             params, modes = _first_or_raise(_identify_and_fit(y[None, None, first:], dt, vehicle, cfg))
             return _done(started, n, vehicle, params, None, modes)
@@ -296,12 +297,18 @@ def _warm(warm_start: Estimate | np.ndarray | None) -> Refinement | np.ndarray |
     return p if p.shape == (3,) and np.all(np.isfinite(p)) else None
 
 
-def _checked(y: np.ndarray, fs_hz: float, cfg: PipelineConfig) -> tuple[np.ndarray, tuple[int, ...]]:
-    """(the window demeaned, with glitches gated; how many per channel)."""
+def checked_window(
+    y: np.ndarray, fs_hz: float, cfg: PipelineConfig, names: tuple[str, ...] = ("front", "rear")
+) -> tuple[np.ndarray, tuple[int, ...]]:
+    """(the window demeaned, with glitches gated; how many per channel); one column per name.
+
+    Raises:
+        InputError: the window cannot be used (the message says why).
+    """
     if not (isinstance(fs_hz, int | float) and math.isfinite(fs_hz) and fs_hz > 0):
         raise InputError(f"sample rate must be a positive number, got {fs_hz!r}")
-    if y.ndim != 2 or y.shape[1] != 2:
-        raise InputError(f"expected accelerations of shape (n, 2), got {y.shape}")
+    if y.ndim != 2 or y.shape[1] != len(names):
+        raise InputError(f"expected accelerations of shape (n, {len(names)}), got {y.shape}")
     if not np.issubdtype(y.dtype, np.number) or np.iscomplexobj(y):
         raise InputError(f"expected real numbers, got dtype {y.dtype}")
     y = y.astype(float, copy=False)
@@ -310,18 +317,19 @@ def _checked(y: np.ndarray, fs_hz: float, cfg: PipelineConfig) -> tuple[np.ndarr
     if y.shape[0] < cfg.min_duration_s * fs_hz:
         raise InputError(f"window too short: {y.shape[0] / fs_hz:.2f} s < {cfg.min_duration_s:g} s")
     try:
-        y, gated = gate_glitches(y)
+        y, gated = gate_glitches(y, names)
     except GlitchError as exc:
         raise InputError(str(exc)) from None
     y = y - y.mean(axis=0)
-    for i, name in enumerate(("front", "rear")):
+    for i, name in enumerate(names):
         if not np.any(np.abs(y[:, i]) > 1e-9):
             raise InputError(f"{name} channel is constant: no vibration to identify")
     return y, gated
 
 
-def _lag_range(cfg: PipelineConfig, fs_hz: float, v: Vehicle, speed_mps: float | None) -> tuple[int, int]:
-    """(first, last) correlation lag in samples."""
+def lag_range(cfg: PipelineConfig, fs_hz: float, v: Vehicle | FullVehicle,
+              speed_mps: float | None) -> tuple[int, int]:
+    """(first, last) correlation lag in samples (the wheelbase delay skipped when asked)."""
     first_s = cfg.min_lag_s
     if cfg.skip_wheelbase_delay and speed_mps is not None and speed_mps > 0:
         first_s = max(first_s, v.wheelbase_m / speed_mps)

@@ -12,14 +12,12 @@ positions (each sensor's on its own: independent errors, one contribution each).
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from rozyn_estimator.method.budget import GROUPS, STATISTICS
+from rozyn_estimator.method.budget import GROUPS, Budget
 from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES, fit_full_inertia
 from rozyn_estimator.method.identification import IdentificationError, Mode
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
@@ -33,35 +31,15 @@ _QUADS = {"suspension_stiffness": "suspension_stiffness_npm", "suspension_dampin
 _AXLE = {"front": (0, 1), "rear": (2, 3)}
 
 
-@dataclass(frozen=True)
-class FullBudget:
-    """The statistical covariance and the systematic contributions of one full-car estimate."""
+class FullBudget(Budget):
+    """The half car's :class:`~rozyn_estimator.method.budget.Budget` over the full car's five
+    parameters and its own tolerances (tracks, anti-roll bars, lateral sensor positions)."""
 
-    statistical: np.ndarray  # (5, 5) in FULL_PARAM_NAMES order
-    contributions: dict[str, np.ndarray] = field(default_factory=dict)  # key -> (5,) shift per 1 u
+    NAMES = FULL_PARAM_NAMES
 
-    @property
-    def systematic(self) -> np.ndarray:
-        out = np.zeros((5, 5))
-        for c in self.contributions.values():
-            out += np.outer(c, c)
-        return out
-
-    @property
-    def total(self) -> np.ndarray:
-        return self.statistical + self.systematic
-
-    def by_group(self, i: int) -> list[tuple[str, float]]:
-        """(contributor, std) for parameter ``i``, largest first, statistics included."""
-        groups: dict[str, float] = {STATISTICS: float(self.statistical[i, i])}
-        for key, c in self.contributions.items():
-            label = next(v for k, v in _GROUPS.items() if key.startswith(k))
-            groups[label] = groups.get(label, 0.0) + float(c[i]) ** 2
-        return sorted(((k, math.sqrt(max(v, 0.0))) for k, v in groups.items()), key=lambda kv: -kv[1])
-
-    def to_dict(self) -> dict[str, object]:
-        return {"statistical": self.statistical.tolist(), "systematic": self.systematic.tolist(),
-                "contributors": {name: dict(self.by_group(i)) for i, name in enumerate(FULL_PARAM_NAMES)}}
+    @staticmethod
+    def group(key: str) -> str:
+        return next(label for prefix, label in _GROUPS.items() if key.startswith(prefix))
 
 
 def full_contributions(v: FullVehicle, modes: Sequence[Mode], sensors: Sequence[int], params: np.ndarray,

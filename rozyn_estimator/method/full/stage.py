@@ -27,8 +27,8 @@ from rozyn_estimator.method.config import PipelineConfig
 from rozyn_estimator.method.correlation import correlation_sums
 from rozyn_estimator.method.full.budget import FullBudget, full_contributions
 from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES, fit_full_inertia
-from rozyn_estimator.method.glitches import GlitchError, gate_glitches
 from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
+from rozyn_estimator.method.pipeline import InputError, checked_window, lag_range
 from rozyn_estimator.method.variance import jackknife_covariance
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
 
@@ -74,10 +74,6 @@ class FullEstimate:
         return out
 
 
-class _InputError(Exception):
-    """The window cannot be used (becomes a failed status)."""
-
-
 def estimate_full(
     accel_mps2: np.ndarray,
     fs_hz: float,
@@ -105,9 +101,9 @@ def estimate_full(
     n = int(accel.shape[0]) if accel.ndim >= 1 else 0
     try:
         index = _sensor_indices(sensors)
-        y = _checked(accel, fs_hz, cfg, tuple(sensors))
+        y, _ = checked_window(accel, fs_hz, cfg, tuple(sensors))
         params, cov, modes, notes = _identify(y, fs_hz, vehicle, cfg, speed_mps, index)
-    except (_InputError, IdentificationError, np.linalg.LinAlgError) as exc:
+    except (InputError, IdentificationError, np.linalg.LinAlgError) as exc:
         return FullEstimate(status="failed", reason=str(exc), n_samples=n, sensors=tuple(sensors),
                             elapsed_ms=(time.perf_counter() - started) * 1e3)
     budget = None
@@ -122,33 +118,9 @@ def estimate_full(
 def _sensor_indices(sensors: Sequence[str]) -> tuple[int, ...]:
     unknown = [s for s in sensors if s not in CORNERS]
     if unknown or len(set(sensors)) != len(sensors) or len(sensors) not in (3, 4):
-        raise _InputError(f"full car: sensors must be 3 or 4 distinct corners of {', '.join(CORNERS)}; "
+        raise InputError(f"full car: sensors must be 3 or 4 distinct corners of {', '.join(CORNERS)}; "
                           f"got {', '.join(sensors) or 'none'}")
     return tuple(CORNERS.index(s) for s in sensors)
-
-
-def _checked(accel: np.ndarray, fs_hz: float, cfg: PipelineConfig, names: tuple[str, ...]) -> np.ndarray:
-    """The window demeaned, with glitches gated."""
-    if not (isinstance(fs_hz, int | float) and math.isfinite(fs_hz) and fs_hz > 0):
-        raise _InputError(f"sample rate must be a positive number, got {fs_hz!r}")
-    if accel.ndim != 2 or accel.shape[1] != len(names):
-        raise _InputError(f"expected accelerations of shape (n, {len(names)}), got {accel.shape}")
-    if not np.issubdtype(accel.dtype, np.number) or np.iscomplexobj(accel):
-        raise _InputError(f"expected real numbers, got dtype {accel.dtype}")
-    y = accel.astype(float, copy=False)
-    if not np.all(np.isfinite(y)):
-        raise _InputError(f"{int(np.sum(~np.isfinite(y)))} samples are NaN or Inf")
-    if y.shape[0] < cfg.min_duration_s * fs_hz:
-        raise _InputError(f"window too short: {y.shape[0] / fs_hz:.2f} s < {cfg.min_duration_s:g} s")
-    try:
-        y, _ = gate_glitches(y, names)
-    except GlitchError as exc:
-        raise _InputError(str(exc)) from None
-    y = y - y.mean(axis=0)
-    for i, name in enumerate(names):
-        if not np.any(np.abs(y[:, i]) > 1e-9):
-            raise _InputError(f"{name} channel is constant: no vibration to identify")
-    return y
 
 
 def _identify(
@@ -157,15 +129,13 @@ def _identify(
 ) -> tuple[np.ndarray, np.ndarray | None, tuple[Mode, ...], tuple[str, ...]]:
     """(params, jackknife covariance or None, the body modes, notes); raises on failure."""
     n, dt = y.shape[0], 1.0 / fs_hz
-    first_s = cfg.min_lag_s
-    if cfg.skip_wheelbase_delay and speed_mps is not None and speed_mps > 0:
-        first_s = max(first_s, v.wheelbase_m / speed_mps)
-    first = max(1, math.ceil(first_s * fs_hz - 1e-9))  # lag 0 carries the sensor noise variance
-    last = first + round(cfg.max_lag_s * fs_hz)
+    first, last = lag_range(cfg, fs_hz, v, speed_mps)
+    if first == 0:  # always the multi-reference decays here: lag 0 carries the sensor noise variance
+        first, last = 1, last + 1
     jackknife = cfg.variance == "jackknife"
     blocks = cfg.jackknife_blocks if jackknife else 1
     if n < blocks * (last + 1) or n < 4 * (last + 1):
-        raise _InputError(f"window too short for {cfg.max_lag_s:g} s of correlation lags in {blocks} blocks: "
+        raise InputError(f"window too short for {cfg.max_lag_s:g} s of correlation lags in {blocks} blocks: "
                           f"{n / fs_hz:.1f} s")
     sums = correlation_sums(y, last, blocks)
     total = sums.sum(axis=0)
