@@ -81,6 +81,7 @@ def estimate_full(
     config: PipelineConfig | None = None,
     speed_mps: float | None = None,
     sensors: Sequence[str] = CORNERS,
+    warm: FullEstimate | None = None,
 ) -> FullEstimate:
     """Rozyn's stage of the full car on one window.
 
@@ -94,6 +95,8 @@ def estimate_full(
         speed_mps: the vehicle's speed [m/s] when known: the correlation lags shorter than
             the wheelbase delay are skipped (the rear wheels repeat the front ones' road).
         sensors: the corner (``front_left`` …) of each column's accelerometer.
+        warm: the previous window's estimate (the refinement's warm start; unused by
+            Rozyn's stage).
     """
     cfg = config or PipelineConfig()
     started = time.perf_counter()
