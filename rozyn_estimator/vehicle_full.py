@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.parameters import check, param, spec_of
+from rozyn_estimator.parameters import Param, build, check, param, spec_of
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.vehicle import (
     MAX_VEHICLE_FILE_BYTES,
@@ -50,10 +50,15 @@ from rozyn_estimator.vehicle import (
     load_yaml_file,
     one_line,
     vehicle_from_mapping,
+    vehicle_from_parameters,
 )
 
 CORNERS = ("front_left", "front_right", "rear_left", "rear_right")
 MODELS = ("half", "full")
+MODEL_PARAM = Param("vehicle model: half (front and rear accelerometers, the vehicle.* parameters of the "
+                    "half car) or full (corner accelerometers, those of the full car); a vehicle_file's own "
+                    "model: key decides for it", choices=MODELS, read_only=True)
+"""The nodes' ``vehicle.model`` parameter (default ``half``)."""
 Quad = tuple[float, float, float, float]
 _POSITIVE: dict[str, Any] = {"low": 0.0, "open_low": True, "length": 4}
 _SHARE = {"low": 0.0, "high": 1.0}
@@ -283,6 +288,32 @@ def load_any_vehicle(path: str | Path) -> Vehicle | FullVehicle:
     return any_vehicle_from_mapping(_vehicle_section(data, str(p)), source=str(p))
 
 
+def any_vehicle_from_parameters(values: Mapping[str, Any]) -> Vehicle | FullVehicle:
+    """The vehicle of a node from its flat parameter values: ``vehicle_file`` when set (a full
+    car when the file says ``model: full``), else the ``vehicle.*`` values of the model
+    ``vehicle.model`` names (``half`` by default).
+
+    Raises:
+        ConfigError: an invalid value or file, or ``vehicle.model`` full with a half car's
+            vehicle file.
+    """
+    model = values.get("vehicle.model", "half")
+    if model not in MODELS:
+        raise ConfigError(f"vehicle.model: must be one of {', '.join(MODELS)}, got {one_line(repr(model))}")
+    if values.get("vehicle_file"):
+        vehicle = load_any_vehicle(values["vehicle_file"])
+        if model == "full" and not isinstance(vehicle, FullVehicle):
+            path = one_line(str(values["vehicle_file"]))
+            raise ConfigError(f"vehicle.model is full but vehicle_file {path} is a half car's (a full car's "
+                              "file says model: full)")
+        return vehicle
+    if model == "full":
+        given = {k: v for k, v in values.items() if k.startswith("vehicle.")}
+        full: FullVehicle = build(FullVehicle(), given)
+        return full
+    return vehicle_from_parameters(values)
+
+
 def load_full_vehicle(path: str | Path) -> FullVehicle:
     """Load a full-car vehicle file (it must say ``model: full``).
 
@@ -307,6 +338,6 @@ def dump_full_vehicle(v: FullVehicle) -> str:
     return "\n".join(lines) + "\n"
 
 
-__all__ = ["CORNERS", "FULL_FIELD_UNITS", "FullTolerances", "FullVehicle", "any_vehicle_from_mapping",
-           "centreline_half_car", "dump_full_vehicle", "full_vehicle_from_mapping", "load_any_vehicle",
-           "load_full_vehicle"]
+__all__ = ["CORNERS", "FULL_FIELD_UNITS", "MODEL_PARAM", "FullTolerances", "FullVehicle",
+           "any_vehicle_from_mapping", "any_vehicle_from_parameters", "centreline_half_car",
+           "dump_full_vehicle", "full_vehicle_from_mapping", "load_any_vehicle", "load_full_vehicle"]

@@ -1,4 +1,4 @@
-"""The online estimator: sliding window, front/rear pairing, gaps, and the update schedule.
+"""The online estimator: sliding window, channel pairing, gaps, and the update schedule.
 
 ROS-free, and the one code path for online and offline use: the estimator node feeds it
 from its subscription callbacks, ``rozyn replay`` from bag messages. Everything is driven
@@ -9,10 +9,12 @@ Feeding: :meth:`OnlineEstimator.add` per sample (tiny work: checks and a list ap
 returns the updates that sample made due; :meth:`OnlineEstimator.add_batch` takes many
 samples in arrival order (vectorised when they are clean, one by one otherwise: the same
 result) and returns each due update with the position of the message that made it due.
-Updates fall due every ``update_period_s`` of message time once *both* channels have
-reached the due time; a due :class:`Job` is a snapshot of the window (cheap, in the
-feeding thread) and :meth:`OnlineEstimator.compute` runs the pipeline on it (in any
-thread, in due order). :meth:`OnlineEstimator.report` gives one diagnostics message.
+The channels: the half car's front and rear accelerometers, or the full car's three or
+four corners (:class:`~rozyn_estimator.online.records.Layout`). Updates fall due every
+``update_period_s`` of message time once *all* channels have reached the due time; a due
+:class:`Job` is a snapshot of the window (cheap, in the feeding thread) and
+:meth:`OnlineEstimator.compute` runs the pipeline on it (any thread, in due order).
+:meth:`OnlineEstimator.report` gives one diagnostics message.
 
 Bad input is dropped and counted, never raised: non-finite values, duplicate stamps,
 stamps older than the channel's last (out of order: not also counted missing). A gap
@@ -43,54 +45,60 @@ import math
 import threading
 from collections import Counter, deque
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
+from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import Estimate, PipelineConfig
+from rozyn_estimator.method.full import FullEstimate
+from rozyn_estimator.online.batch import SpeedSamples, clean_batch, trigger_of
 from rozyn_estimator.online.channel import Channel
 from rozyn_estimator.online.config import OnlineConfig
-from rozyn_estimator.online.records import ERROR, NS, WARN, Health, Job, Level, Update
+from rozyn_estimator.online.estimator_config import EstimatorConfig
+from rozyn_estimator.online.records import ERROR, NS, WARN, Health, Job, Layout, Level, Update, layout_of
 from rozyn_estimator.online.status import health_values, status
 from rozyn_estimator.online.update import compute_update
 from rozyn_estimator.vehicle import Vehicle
+from rozyn_estimator.vehicle_full import FullVehicle
 
 _NONE: tuple[Job, ...] = ()
 _MAX_EVENTS = 20
-
-
-@dataclass(frozen=True)
-class SpeedSamples:
-    """Speed samples of a batch: stamps [ns], speeds [m/s] and arrival positions."""
-
-    stamps_ns: np.ndarray
-    values: Sequence[float]
-    order: np.ndarray
 
 
 class OnlineEstimator:
     """Window, pairing, gap/reset logic and the update schedule for one vehicle.
 
     Args:
-        vehicle: the known vehicle parameters.
+        vehicle: the known vehicle parameters: a half car, or a full car (its updates run
+            :func:`~rozyn_estimator.method.full.estimate_full`).
         config: window and schedule settings.
         pipeline: settings of each update.
-        names: what to call the front and rear sensor in messages (e.g. their topics).
+        names: what to call each sensor in messages (e.g. their topics; default: ``channels``).
+        channels: the full car's corners with an accelerometer, three or four of ``front_left``,
+            ``front_right``, ``rear_left``, ``rear_right`` (default: all four; the half car's
+            are ``front`` and ``rear``); channel ``k`` of :meth:`add` is ``channels[k]``.
+
+    Raises:
+        ConfigError: channels the vehicle cannot have, or names not one per channel.
     """
 
     def __init__(
         self,
-        vehicle: Vehicle,
+        vehicle: Vehicle | FullVehicle,
         config: OnlineConfig | None = None,
         pipeline: PipelineConfig | None = None,
-        names: tuple[str, str] = ("front", "rear"),
+        names: Sequence[str] | None = None,
+        channels: Sequence[str] | None = None,
     ) -> None:
-        self.names = names
+        self._layout = layout_of(vehicle, channels)
+        self.names = tuple(self._layout.channels if names is None else names)
+        if len(self.names) != len(self._layout.channels):
+            raise ConfigError(f"one name per channel ({', '.join(self._layout.channels)}), got {self.names}")
         self._lock = threading.RLock()
         self._vehicle = vehicle
         self._config = config or OnlineConfig()
         self._pipeline = pipeline or PipelineConfig()
-        self._channels = (Channel(), Channel())
+        self._channels = tuple(Channel() for _ in self._layout.channels)
         self._speed = Channel()
         self._next_due_ns: int | None = None
         self._dropped: Counter[str] = Counter()  # reason -> count, since start
@@ -99,12 +107,23 @@ class OnlineEstimator:
         self._events: deque[tuple[Level, str]] = deque(maxlen=_MAX_EVENTS)  # not yet reported
         self._last_update: Update | None = None
         self._reported_losses = 0  # drops and missing samples at the last report
-        self._warm: Estimate | None = None  # the last published estimate
+        self._warm: Estimate | FullEstimate | None = None  # the last published estimate
+
+    @classmethod
+    def from_config(cls, config: EstimatorConfig) -> OnlineEstimator:
+        """The estimator a node of that configuration runs (its vehicle, sensors and topics)."""
+        labels, topics = zip(*config.sensors, strict=True)
+        return cls(config.model_vehicle, config.online, config.pipeline, topics, labels)
 
     # ------------------------------------------------------------- settings
     @property
-    def vehicle(self) -> Vehicle:
+    def vehicle(self) -> Vehicle | FullVehicle:
         return self._vehicle
+
+    @property
+    def layout(self) -> Layout:
+        """The channels and the parameters of the vehicle's updates."""
+        return self._layout
 
     @property
     def config(self) -> OnlineConfig:
@@ -114,8 +133,15 @@ class OnlineEstimator:
     def pipeline(self) -> PipelineConfig:
         return self._pipeline
 
-    def reconfigure(self, vehicle: Vehicle, config: OnlineConfig, pipeline: PipelineConfig) -> None:
-        """New settings from the next update on (the window and schedule go on)."""
+    def reconfigure(self, vehicle: Vehicle | FullVehicle, config: OnlineConfig,
+                    pipeline: PipelineConfig) -> None:
+        """New settings from the next update on (the window and schedule go on).
+
+        Raises:
+            ConfigError: a vehicle of the other model (half or full car).
+        """
+        if isinstance(vehicle, FullVehicle) != self._layout.full:
+            raise ConfigError("the vehicle model (half or full car) cannot change while running")
         with self._lock:
             self._vehicle, self._config, self._pipeline = vehicle, config, pipeline
 
@@ -141,12 +167,13 @@ class OnlineEstimator:
         return self._last_update
 
     def samples(self, channel: int) -> int:
-        """Samples taken in on a channel (0 front, 1 rear) since the start."""
+        """Samples taken in on a channel (an index into ``layout.channels``) since the start."""
         return self._channels[channel].count
 
     # -------------------------------------------------------------- feeding
     def add(self, channel: int, stamp_ns: int, value: float) -> Sequence[Job]:
-        """One accelerometer sample (channel 0 front, 1 rear) [ns, m/s^2]; the jobs it made due."""
+        """One accelerometer sample (channel: an index into ``layout.channels``; the half car's 0
+        front, 1 rear) [ns, m/s^2]; the jobs it made due."""
         with self._lock:
             self._add(channel, stamp_ns, value)
             return self._take_due()
@@ -157,10 +184,11 @@ class OnlineEstimator:
             self._add_speed(stamp_ns, speed_mps)
 
     def drop(self, channel: int, reason: str, count: int = 1) -> None:
-        """Count messages that could not be used (channel 0 front, 1 rear, 2 speed)."""
+        """Count messages that could not be used (channel: an index into ``layout.channels``; one
+        more: speed)."""
         with self._lock:
-            self._dropped[f"{('front', 'rear', 'speed')[channel]}: {reason}"] += count
-            if channel < 2:
+            self._dropped[f"{(*self._layout.channels, 'speed')[channel]}: {reason}"] += count
+            if channel < len(self._channels):
                 self._channels[channel].reject(reason, count)
 
     def add_batch(
@@ -178,7 +206,7 @@ class OnlineEstimator:
         catches up (so a silent sensor cannot make memory grow), as they would be one by one.
 
         Args:
-            channels, stamps_ns, values: accelerometer samples (0 front, 1 rear).
+            channels, stamps_ns, values: accelerometer samples (channel indices as :meth:`add`'s).
             order: their arrival positions (default: as given); ``speed.order`` places
                 the speed samples among them.
             speed: speed samples that arrived among them.
@@ -193,7 +221,7 @@ class OnlineEstimator:
         values = np.asarray(values, dtype=float)
         order = np.arange(channels.size) if order is None else np.asarray(order)
         with self._lock:
-            if not self._clean(channels, stamps_ns, values):
+            if not clean_batch(self._channels, channels, stamps_ns, values, self._config.max_gap_s * NS):
                 return self._one_by_one(channels, stamps_ns, values, order, speed)
             before = [ch.last_ns for ch in self._channels]
             for c, ch in enumerate(self._channels):
@@ -250,7 +278,7 @@ class OnlineEstimator:
         ch.append(stamp_ns, value)
 
     def _reject(self, channel: int, reason: str) -> None:
-        self._dropped[f"{('front', 'rear')[channel]}: {reason}"] += 1
+        self._dropped[f"{self._layout.channels[channel]}: {reason}"] += 1
         self._channels[channel].reject(reason)
 
     def _add_speed(self, stamp_ns: int, speed_mps: float) -> None:
@@ -262,21 +290,6 @@ class OnlineEstimator:
             self._dropped["speed: out-of-order speed stamp"] += 1
             return
         ch.append(stamp_ns, speed_mps)
-
-    def _clean(self, channels: np.ndarray, stamps: np.ndarray, values: np.ndarray) -> bool:
-        """No sample of the batch would be dropped or reset the window (:meth:`_add`'s rules)."""
-        if not np.all(np.isfinite(values)):
-            return False
-        gap = self._config.max_gap_s * NS
-        for c in (0, 1):
-            s = stamps[channels == c]
-            if s.size == 0:
-                continue
-            last = self._channels[c].last_ns
-            steps = np.diff(s) if last is None else np.diff(s, prepend=last)
-            if steps.size and (steps.min() <= 0 or steps.max() > gap):
-                return False
-        return True
 
     def _one_by_one(self, channels: np.ndarray, stamps: np.ndarray, values: np.ndarray, order: np.ndarray,
                     speed: SpeedSamples | None) -> list[tuple[Job, int]]:
@@ -296,20 +309,13 @@ class OnlineEstimator:
     def _as_received(self, job: Job, before: list[int | None], channels: np.ndarray, stamps: np.ndarray,
                      order: np.ndarray, speed: SpeedSamples | None) -> tuple[Job, int]:
         """A job of a clean batch as the node would have snapshot it: the trigger, no late speeds."""
-        reached = []
-        for c in (0, 1):
-            last = before[c]
-            if last is not None and last >= job.due_ns:
-                continue  # this channel was there before the batch
-            idx = np.flatnonzero(channels == c)
-            reached.append(int(idx[np.searchsorted(stamps[idx], job.due_ns)]))
-        trigger = max(reached)
+        trigger = trigger_of(job.due_ns, before, channels, stamps)
         if speed is not None:
             late = (speed.order > order[trigger]) & (speed.stamps_ns <= job.due_ns)
             if np.any(late):
                 t, v = job.speed
                 keep = ~np.isin(t, speed.stamps_ns[late])
-                job = Job(job.due_ns, job.front, job.rear, (t[keep], v[keep]), job.epoch)
+                job = Job(job.due_ns, job.samples, (t[keep], v[keep]), job.epoch)
         return job, trigger
 
     # ------------------------------------------------------------- schedule
@@ -341,13 +347,13 @@ class OnlineEstimator:
                 ch.trim(keep)
 
     def _due(self) -> Sequence[Job]:
-        front, rear = self._channels
-        if front.last_ns is None or rear.last_ns is None:
+        lasts = [ch.last_ns for ch in self._channels]
+        if None in lasts:
             return _NONE
         period = round(self._config.update_period_s * NS)
         if self._next_due_ns is None:
-            self._next_due_ns = max(front.first_ns(), rear.first_ns()) + period
-        reached = min(front.last_ns, rear.last_ns)
+            self._next_due_ns = max(ch.first_ns() for ch in self._channels) + period
+        reached = min(t for t in lasts if t is not None)
         if reached < self._next_due_ns:
             return _NONE
         window = round(self._config.window_s * NS)
@@ -355,8 +361,8 @@ class OnlineEstimator:
         while reached >= self._next_due_ns:
             due = self._next_due_ns
             lo = due - window
-            jobs.append(Job(due, front.window(lo, due), rear.window(lo, due), self._speed.window(lo, due),
-                            self._epoch))
+            samples = tuple(ch.window(lo, due) for ch in self._channels)
+            jobs.append(Job(due, samples, self._speed.window(lo, due), self._epoch))
             self._next_due_ns = due + period
         return jobs
 
@@ -370,7 +376,7 @@ class OnlineEstimator:
             current = job.epoch == self._epoch
             settings = (self._config, self._vehicle, self._pipeline, self._warm if current else None)
         try:
-            update = compute_update(job, self.names, *settings)
+            update = compute_update(job, self.names, *settings, self._layout)
         except Exception as exc:  # the one guard: node and replay both compute here
             text = f"{type(exc).__name__}: {exc}"
             text = text if len(text) <= 200 else text[:197] + "..."
@@ -383,7 +389,7 @@ class OnlineEstimator:
         return update
 
     # --------------------------------------------------------------- health
-    def health(self, silent_s: tuple[float, float] | None = None) -> Health:
+    def health(self, silent_s: Sequence[float] | None = None) -> Health:
         """The current status for diagnostics, without changing anything.
 
         Args:
@@ -394,7 +400,7 @@ class OnlineEstimator:
         with self._lock:
             return self._health(silent_s)
 
-    def report(self, silent_s: tuple[float, float] | None = None) -> Health:
+    def report(self, silent_s: Sequence[float] | None = None) -> Health:
         """:meth:`health` for one diagnostics message: the events and losses it reports
         (window resets, dropped and missing samples) are not reported again."""
         with self._lock:
@@ -404,11 +410,11 @@ class OnlineEstimator:
             return health
 
     def _losses(self) -> int:
-        return sum(self._dropped.values()) + self._channels[0].missing + self._channels[1].missing
+        return sum(self._dropped.values()) + sum(ch.missing for ch in self._channels)
 
-    def _health(self, silent_s: tuple[float, float] | None) -> Health:
+    def _health(self, silent_s: Sequence[float] | None) -> Health:
         lost = self._losses() - self._reported_losses
         level, message = status(self.names, self._channels, self._config.silence_s, silent_s,
                                 tuple(self._events), self._last_update, lost)
-        return Health(level, message, health_values(self._channels, self._resets, self._dropped,
+        return Health(level, message, health_values(self._channels, self._layout, self._resets, self._dropped,
                                                     self._last_update))

@@ -1,7 +1,8 @@
 """Everything that decides the estimator's output, as one record that travels in bags.
 
 The recorder stores the :class:`EstimatorConfig` of the estimator node it records (its
-vehicle, window/schedule, pipeline, input topics, field and speed source, output frame)
+vehicle, half or full car, window/schedule, pipeline, input topics, field and speed source,
+output frame)
 as JSON in the bag's ``custom_data`` under :data:`CUSTOM_DATA_KEY`, so ``rozyn replay``
 reproduces the node's estimates without the user retyping its parameters. ROS-free.
 """
@@ -17,9 +18,10 @@ from typing import Any
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.online.config import OnlineConfig
-from rozyn_estimator.parameters import check, param
+from rozyn_estimator.parameters import build, check, param
 from rozyn_estimator.tolerances import Tolerances
-from rozyn_estimator.vehicle import Vehicle, config_from_parameters
+from rozyn_estimator.vehicle import Vehicle
+from rozyn_estimator.vehicle_full import CORNERS, FullVehicle, any_vehicle_from_parameters
 
 CUSTOM_DATA_KEY = "rozyn_estimator.estimator_config"
 SPEED_TOPIC_TYPES = {  # speed_topic_type -> (message type, fields whose norm is the speed)
@@ -32,8 +34,12 @@ SPEED_TOPIC_TYPES = {  # speed_topic_type -> (message type, fields whose norm is
 class EstimatorConfig:
     """The estimator node's effective configuration (defaults: the node's defaults).
 
-    Topic names are absolute when recorded by the recorder (resolved in the node's
-    namespace); relative names are taken from the root namespace.
+    The vehicle is the half car (``vehicle``; two sensors, ``front_topic`` and
+    ``rear_topic``) unless ``full_vehicle`` is set: then it is that full car, and the
+    sensors are the corners whose ``*_topic`` is not empty (three or four; ``vehicle`` and
+    the half car's topics are unused). Topic names are absolute when recorded by the
+    recorder (resolved in the node's namespace); relative names are taken from the root
+    namespace.
     """
 
     vehicle: Vehicle = param(description="the vehicle (vehicle.* parameters)", default_factory=Vehicle)
@@ -42,6 +48,14 @@ class EstimatorConfig:
                                      default_factory=PipelineConfig)
     front_topic: str = param("accel/front", "front accelerometer topic (sensor_msgs/Imu)", read_only=True)
     rear_topic: str = param("accel/rear", "rear accelerometer topic (sensor_msgs/Imu)", read_only=True)
+    front_left_topic: str = param("accel/front_left", "full car: front left accelerometer topic "
+                                  "(sensor_msgs/Imu); empty: no sensor there", read_only=True)
+    front_right_topic: str = param("accel/front_right", "full car: front right accelerometer topic; empty: "
+                                   "no sensor there", read_only=True)
+    rear_left_topic: str = param("accel/rear_left", "full car: rear left accelerometer topic; empty: no "
+                                 "sensor there", read_only=True)
+    rear_right_topic: str = param("accel/rear_right", "full car: rear right accelerometer topic; empty: no "
+                                  "sensor there", read_only=True)
     field: str = param("linear_acceleration.z", "numeric field of the Imu message that holds the vertical "
                        "acceleration (gravity included is fine: the mean is removed)", read_only=True)
     speed_topic: str = param("", "optional vehicle speed topic; empty: use speed_mps", read_only=True)
@@ -53,26 +67,60 @@ class EstimatorConfig:
                                   unit="m", low=-100.0, high=100.0)
     hardware_id: str = param("half_car", "hardware_id of the diagnostic status")
     node_name: str = param("/estimator_node", "name of the diagnostic status", ros_name="")
+    full_vehicle: FullVehicle | None = None  # the full car (vehicle.model full or a full-car vehicle_file)
 
     def __post_init__(self) -> None:
-        check(self)
+        check(self, (
+            ("full_vehicle", lambda c: c.full_vehicle is None or isinstance(c.full_vehicle, FullVehicle),
+             "must be a FullVehicle or None"),
+            ("front_left_topic", lambda c: c.full_vehicle is None or len(c.sensors) >= 3,
+             "a full car needs at least three of front_left_topic, front_right_topic, rear_left_topic, "
+             "rear_right_topic"),
+        ))
 
     def replace(self, **changes: Any) -> EstimatorConfig:
         return dataclasses.replace(self, **changes)
+
+    @property
+    def model(self) -> str:
+        """``half`` or ``full``."""
+        return "half" if self.full_vehicle is None else "full"
+
+    @property
+    def model_vehicle(self) -> Vehicle | FullVehicle:
+        """The vehicle the estimator runs: the full car when set, else the half car."""
+        return self.vehicle if self.full_vehicle is None else self.full_vehicle
+
+    @property
+    def sensors(self) -> tuple[tuple[str, str], ...]:
+        """(channel, topic) of each accelerometer in use: the half car's front and rear, or the
+        full car's corners that have a topic (in ``front_left`` … ``rear_right`` order)."""
+        if self.full_vehicle is None:
+            return (("front", self.front_topic), ("rear", self.rear_topic))
+        topics = (self.front_left_topic, self.front_right_topic, self.rear_left_topic, self.rear_right_topic)
+        return tuple((c, t) for c, t in zip(CORNERS, topics, strict=True) if t)
 
     @classmethod
     def from_parameters(cls, values: Mapping[str, Any]) -> EstimatorConfig:
         """The estimator node's interpretation of its parameter values (flat, dotted).
 
         The online settings are the top-level parameters named like the fields of
-        :class:`OnlineConfig`; ``pipeline.*`` and ``vehicle.*``/``vehicle_file`` the rest.
+        :class:`OnlineConfig`; ``pipeline.*`` and ``vehicle.*``/``vehicle_file`` the rest (a
+        full car when ``vehicle.model`` is ``full`` or the vehicle file says ``model: full``).
         Raises ConfigError naming the first invalid parameter.
         """
-        config: EstimatorConfig = config_from_parameters(cls(), values)
-        return config
+        others = {k: v for k, v in values.items() if not k.startswith("vehicle.")}
+        config: EstimatorConfig = build(cls(), others)
+        vehicle = any_vehicle_from_parameters(values)
+        if isinstance(vehicle, FullVehicle):
+            return config.replace(full_vehicle=vehicle)
+        return config.replace(vehicle=vehicle)
 
     def to_json(self) -> str:
-        return json.dumps(dataclasses.asdict(self), sort_keys=True)
+        data = dataclasses.asdict(self)
+        if self.full_vehicle is None:
+            del data["full_vehicle"]  # the half car's record as before the full car
+        return json.dumps(data, sort_keys=True)
 
     @classmethod
     def from_json(cls, text: str, ignored: list[str] | None = None) -> EstimatorConfig:
@@ -89,7 +137,13 @@ class EstimatorConfig:
         if isinstance(vehicle, dict) and "tolerances" not in vehicle:
             # recorded before vehicles had tolerances: replay as that estimator ran
             vehicle["tolerances"] = Tolerances.none().to_dict()
-        return _from_dict(cls(), data, "estimator configuration", [] if ignored is None else ignored)
+        ignored = [] if ignored is None else ignored
+        full = data.pop("full_vehicle", None) if isinstance(data, dict) else None
+        config: EstimatorConfig = _from_dict(cls(), data, "estimator configuration", ignored)
+        if full is None:
+            return config
+        where = "estimator configuration.full_vehicle"
+        return config.replace(full_vehicle=_from_dict(FullVehicle(), full, where, ignored))
 
 
 def _from_dict(default: Any, data: Any, where: str, ignored: list[str]) -> Any:

@@ -1,6 +1,7 @@
-"""Front and rear samples onto one uniform grid: pairing, resampling, anti-aliased decimation.
+"""The accelerometers' samples onto one uniform grid: pairing, resampling, anti-aliased decimation.
 
-ROS-free. Sensors from the simulator share stamps and are paired sample by sample; real
+ROS-free; the half car's front and rear channels or the full car's three or four corners.
+Sensors from the simulator share stamps and are paired sample by sample; real
 sensors at other rates or with offset stamps are resampled (a faster one low-passed
 first, so 1 kHz IMUs work as they are).
 """
@@ -8,6 +9,7 @@ first, so 1 kHz IMUs work as they are).
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 
 import numpy as np
 from scipy import signal
@@ -20,36 +22,55 @@ NS = 1_000_000_000
 def pair_channels(
     front: tuple[np.ndarray, np.ndarray], rear: tuple[np.ndarray, np.ndarray], cfg: OnlineConfig
 ) -> tuple[np.ndarray, np.ndarray, float] | str:
-    """Front/rear samples on one uniform grid: (stamps_ns, (n, 2) values, rate) or a reason.
+    """Front/rear samples on one uniform grid: (stamps_ns, (n, 2) values, rate) or a reason
+    (:func:`align_channels` of the half car's two channels)."""
+    return align_channels((front, rear), cfg)
 
-    Aligned channels (the same stamps within ``pair_tolerance_s``, as from the sim) at
-    most ``max_rate_hz`` fast are paired sample by sample. Otherwise both are resampled
-    by linear interpolation onto a grid at ``rate_hz`` (default: the slower channel's
-    rate, at most ``max_rate_hz``) over their overlap, a channel sampled faster than the
-    grid first low-pass filtered below the grid's Nyquist frequency.
+
+def align_channels(
+    samples: Sequence[tuple[np.ndarray, np.ndarray]], cfg: OnlineConfig
+) -> tuple[np.ndarray, np.ndarray, float] | str:
+    """Samples of k channels on one uniform grid: (stamps_ns, (n, k) values, rate) or a reason.
+
+    Aligned channels (each sample of the first has one of every other channel within
+    ``pair_tolerance_s``, as from the sim) at most ``max_rate_hz`` fast are paired sample
+    by sample. Otherwise all are resampled by linear interpolation onto a grid at
+    ``rate_hz`` (default: the slowest channel's rate, at most ``max_rate_hz``) over their
+    overlap, a channel sampled faster than the grid first low-pass filtered below the
+    grid's Nyquist frequency.
+
+    Args:
+        samples: per channel (stamps_ns, values), each in stamp order.
+        cfg: the tolerance and rates.
     """
-    (tf, vf), (tr, vr) = front, rear
-    if tf.size < 3 or tr.size < 3:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, 2)), 0.0
-    dt_f, dt_r = _period(tf), _period(tr)
+    if any(t.size < 3 for t, _ in samples):
+        return np.zeros(0, dtype=np.int64), np.zeros((0, len(samples))), 0.0
+    periods = [_period(t) for t, _ in samples]
+    (tf, vf), dt_f = samples[0], periods[0]
     tol = cfg.pair_tolerance_s * NS
-    same_rate = abs(dt_f - dt_r) <= max(tol, 0.01 * min(dt_f, dt_r))
+    same_rate = max(periods) - min(periods) <= max(tol, 0.01 * min(periods))
     slowest = NS / cfg.max_rate_hz
     if same_rate and not cfg.rate_hz and dt_f >= slowest * (1 - 1e-6):
-        idx = np.clip(np.searchsorted(tr, tf), 1, tr.size - 1)
-        nearest = np.where(np.abs(tr[idx - 1] - tf) <= np.abs(tr[idx] - tf), idx - 1, idx)
-        match = np.abs(tr[nearest] - tf) <= tol
+        match = np.ones(tf.size, dtype=bool)
+        nearest = []
+        for tr, _ in samples[1:]:
+            idx = np.clip(np.searchsorted(tr, tf), 1, tr.size - 1)
+            near = np.where(np.abs(tr[idx - 1] - tf) <= np.abs(tr[idx] - tf), idx - 1, idx)
+            match &= np.abs(tr[near] - tf) <= tol
+            nearest.append(near)
         if match.mean() > 0.95:
-            t, a, b = tf[match], vf[match], vr[nearest[match]]
+            t = tf[match]
+            cols = [vf[match], *(v[near[match]] for (_, v), near in zip(samples[1:], nearest, strict=True))]
             if t.size > 2 and np.max(np.diff(t)) <= 1.5 * dt_f:
-                return t, np.column_stack([a, b]), NS / dt_f
-    dt = NS / cfg.rate_hz if cfg.rate_hz else max(dt_f, dt_r, slowest)
-    lo, hi = max(tf[0], tr[0]), min(tf[-1], tr[-1])
+                return t, np.column_stack(cols), NS / dt_f
+    dt = NS / cfg.rate_hz if cfg.rate_hz else max(*periods, slowest)
+    lo, hi = max(t[0] for t, _ in samples), min(t[-1] for t, _ in samples)
     if hi - lo < 3 * dt:
-        return "front and rear samples do not overlap in time"
+        return "front and rear samples do not overlap in time" if len(samples) == 2 else \
+            "the accelerometers' samples do not overlap in time"
     grid = hi - np.arange(int((hi - lo) // dt) + 1)[::-1] * dt
     grid_ns = np.round(grid).astype(np.int64)
-    cols = [_resample(t, v, d, grid, dt) for t, v, d in ((tf, vf, dt_f), (tr, vr, dt_r))]
+    cols = [_resample(t, v, d, grid, dt) for (t, v), d in zip(samples, periods, strict=True)]
     return grid_ns, np.column_stack(cols), NS / dt
 
 

@@ -1,15 +1,77 @@
-"""What the online estimator hands out: due jobs, updates, diagnostic statuses (ROS-free)."""
+"""What the online estimator hands out: due jobs, updates, diagnostic statuses (ROS-free).
+
+A :class:`Layout` says what one vehicle model's updates hold: the half car's front and
+rear channels and (m, I_yy, l_f), or the full car's three or four corners and
+(m, I_xx, I_yy, l_f, y_c).
+"""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
+from typing import Any
 
 import numpy as np
 
+from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PARAM_NAMES, Estimate
+from rozyn_estimator.method.full import FULL_PARAM_NAMES, FullEstimate
+from rozyn_estimator.vehicle import Vehicle
+from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
 
 NS = 1_000_000_000
+HALF_CHANNELS = ("front", "rear")
+
+
+@dataclass(frozen=True)
+class Layout:
+    """What the updates of one vehicle model hold.
+
+    Attributes:
+        params: the estimated parameters, in the order of an estimate and its covariance.
+        channels: the accelerometers, in the order of the online estimator's channels:
+            ``front``, ``rear`` (half car) or three or four of :data:`CORNERS` (full car).
+        modes: the body modes an update identifies.
+        positive: the first ``positive`` parameters must be > 0 to publish (the full car's
+            lateral CoG may have either sign).
+    """
+
+    params: tuple[str, ...]
+    channels: tuple[str, ...]
+    modes: int
+    positive: int
+
+    @property
+    def full(self) -> bool:
+        """The full car's layout."""
+        return self.params == FULL_PARAM_NAMES
+
+
+HALF_LAYOUT = Layout(PARAM_NAMES, HALF_CHANNELS, modes=2, positive=3)
+
+
+def layout_of(vehicle: Vehicle | FullVehicle, channels: Sequence[str] | None = None) -> Layout:
+    """The layout of a vehicle's updates.
+
+    Args:
+        vehicle: the half car or the full car.
+        channels: the full car's corners with an accelerometer (default: all four, in
+            :data:`CORNERS` order); the half car's are always front and rear.
+
+    Raises:
+        ConfigError: channels that are not front and rear for a half car, or not three or
+            four distinct corners for a full car.
+    """
+    if not isinstance(vehicle, FullVehicle):
+        if channels is not None and tuple(channels) != HALF_CHANNELS:
+            raise ConfigError(f"a half car's channels are front and rear, got {', '.join(channels)}")
+        return HALF_LAYOUT
+    corners = CORNERS if channels is None else tuple(channels)
+    if len(corners) not in (3, 4) or len(set(corners)) != len(corners) or not set(corners) <= set(CORNERS):
+        raise ConfigError(f"a full car needs three or four distinct corners of {', '.join(CORNERS)}, got "
+                          f"{', '.join(corners) or 'none'}")
+    return Layout(FULL_PARAM_NAMES, corners, modes=3, positive=4)
 
 
 class Level(IntEnum):
@@ -30,10 +92,19 @@ class Job:
     """A due update: the window's samples, snapshot when it fell due."""
 
     due_ns: int
-    front: tuple[np.ndarray, np.ndarray]  # (stamps_ns, values)
-    rear: tuple[np.ndarray, np.ndarray]
+    samples: tuple[tuple[np.ndarray, np.ndarray], ...]  # per channel (stamps_ns, values)
     speed: tuple[np.ndarray, np.ndarray]  # (stamps_ns, speed_mps), may be empty
     epoch: int = 0  # the window's generation: a reset since makes the job stale
+
+    @property
+    def front(self) -> tuple[np.ndarray, np.ndarray]:
+        """The first channel's samples (the half car's front sensor)."""
+        return self.samples[0]
+
+    @property
+    def rear(self) -> tuple[np.ndarray, np.ndarray]:
+        """The second channel's samples (the half car's rear sensor)."""
+        return self.samples[1]
 
 
 @dataclass(frozen=True)
@@ -43,7 +114,7 @@ class Update:
     stamp_ns: int  # time of the window's last paired sample (or the due time)
     level: Level
     message: str
-    estimate: Estimate | None = None  # None when the pipeline was not run
+    estimate: Estimate | FullEstimate | None = None  # None when the pipeline was not run
     window_fill: float = 0.0
     fs_hz: float = 0.0
     speed_mps: float | None = None
@@ -55,12 +126,13 @@ class Update:
 
     @property
     def params(self) -> np.ndarray | None:
-        """(3,) the estimate to publish (``PARAM_NAMES`` order), None when there is none."""
+        """(3,) the half car's estimate to publish (``PARAM_NAMES`` order), (5,) the full car's
+        (``FULL_PARAM_NAMES``); None when there is none."""
         return self.estimate.params if self.estimate is not None and self.estimate.ok else None
 
     @property
     def covariance(self) -> np.ndarray | None:
-        """(3, 3) its covariance, None when there is none."""
+        """(3, 3) or (5, 5) its covariance, None when there is none."""
         return self.estimate.covariance if self.estimate is not None and self.estimate.ok else None
 
 
@@ -73,8 +145,13 @@ class Health:
     values: dict[str, str] = field(default_factory=dict)
 
 
-def update_values(update: Update) -> dict[str, str]:
-    """Key/values describing one update (for diagnostics and replay CSV)."""
+def update_values(update: Update, layout: Layout = HALF_LAYOUT) -> dict[str, str]:
+    """Key/values describing one update (for diagnostics and replay CSV).
+
+    Args:
+        update: the update.
+        layout: its vehicle model's (names the parameters and the channels).
+    """
     out = {
         "update_stamp": f"{update.stamp_ns / NS:.9f}",
         "update_status": LEVEL_NAMES[update.level],
@@ -86,34 +163,43 @@ def update_values(update: Update) -> dict[str, str]:
     if est is None:
         return out
     out["pipeline_ms"] = f"{est.elapsed_ms:.2f}"
-    out["stage"] = est.stage
-    out["glitches_front"], out["glitches_rear"] = (str(n) for n in est.glitches)  # gated in the window
-    stages = [("", est)] if est.rozyn is None else [("", est), ("rozyn_", est.rozyn)]
+    out["stage"] = getattr(est, "stage", "rozyn")  # the full car's stage has no other yet
+    glitches = getattr(est, "glitches", None)  # gated in the window
+    if glitches is not None:
+        out |= {f"glitches_{c}": str(n) for c, n in zip(layout.channels, glitches, strict=True)}
+    rozyn = getattr(est, "rozyn", None)
+    stages = [("", est)] if rozyn is None else [("", est), ("rozyn_", rozyn)]
     for prefix, stage in stages:
         if stage.ok and stage.params is not None:
-            std = stage.std if stage.std is not None else np.full(3, np.nan)
-            for name, value, s in zip(PARAM_NAMES, stage.params, std, strict=True):
+            std = stage.std if stage.std is not None else np.full(len(layout.params), np.nan)
+            for name, value, s in zip(layout.params, stage.params, std, strict=True):
                 out[f"{prefix}{name}"] = f"{value:.6g}"
                 out[f"{prefix}{name}_std"] = f"{s:.4g}"
     budget = est.budget
     if budget is not None:  # the published std's statistical and systematic parts, largest contributors
         stat, sys = np.sqrt(np.diag(budget.statistical)), np.sqrt(np.diag(budget.systematic))
-        for i, name in enumerate(PARAM_NAMES):
+        for i, name in enumerate(layout.params):
             out[f"{name}_std_statistical"] = f"{stat[i]:.4g}"
             out[f"{name}_std_systematic"] = f"{sys[i]:.4g}"
             out[f"{name}_budget"] = budget.text(i)
         for c in budget.calibration:
             out[f"calibrated {c.name}"] = c.text()
-    ref = est.refinement
+    out |= _refinement_values(getattr(est, "refinement", None), layout.channels)
+    for i, mode in enumerate(est.modes):
+        out[f"mode{i + 1}_freq_hz"] = f"{mode.freq_hz:.4f}"
+        out[f"mode{i + 1}_damping"] = f"{mode.damping_ratio:.4f}"
+    return out
+
+
+def _refinement_values(ref: Any, channels: Sequence[str]) -> dict[str, str]:
+    """The refinement's model-fit check, fitted waviness, sensor noise and iterations."""
+    out = {}
     if ref is not None and ref.model_fit is not None:
         out["model_fit_p"] = f"{ref.model_fit.p_value:.3g}"
         out["model_fit"] = ref.model_fit.verdict
     if ref is not None and ref.ok:
         out["road_waviness"] = f"{ref.waviness:.3f}"
-        out["noise_std_front_mps2"] = f"{ref.noise_std_mps2[0]:.4g}"
-        out["noise_std_rear_mps2"] = f"{ref.noise_std_mps2[1]:.4g}"
+        for c, noise in zip(channels, ref.noise_std_mps2, strict=False):
+            out[f"noise_std_{c}_mps2"] = f"{noise:.4g}"
         out["refine_iterations"] = str(ref.iterations)
-    for i, mode in enumerate(est.modes):
-        out[f"mode{i + 1}_freq_hz"] = f"{mode.freq_hz:.4f}"
-        out[f"mode{i + 1}_damping"] = f"{mode.damping_ratio:.4f}"
     return out

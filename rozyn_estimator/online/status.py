@@ -12,16 +12,16 @@ from collections import Counter
 from collections.abc import Sequence
 
 from rozyn_estimator.online.channel import Channel
-from rozyn_estimator.online.records import NS, OK, WARN, Level, Update, update_values
+from rozyn_estimator.online.records import NS, OK, WARN, Layout, Level, Update, update_values
 
 
-def status(names: tuple[str, str], channels: tuple[Channel, Channel], silence_s: float,
-           silent_s: tuple[float, float] | None, events: Sequence[tuple[Level, str]],
+def status(names: Sequence[str], channels: Sequence[Channel], silence_s: float,
+           silent_s: Sequence[float] | None, events: Sequence[tuple[Level, str]],
            last: Update | None, lost: int) -> tuple[Level, str]:
     """Level and message, most urgent first: a silent sensor, events, the last update, losses.
 
     Args:
-        names: what to call the front and rear sensor.
+        names: what to call each sensor (front and rear, or the corners).
         channels: their samples.
         silence_s: a sensor silent (or behind) this long is waited for.
         silent_s: seconds since each sensor's last message arrived (the node's clock), or
@@ -47,8 +47,8 @@ def status(names: tuple[str, str], channels: tuple[Channel, Channel], silence_s:
     return OK, last.message if last is not None else "collecting the first window"
 
 
-def _waiting(names: tuple[str, str], channels: tuple[Channel, Channel], silence_s: float,
-             silent_s: tuple[float, float] | None) -> list[tuple[float, str]]:
+def _waiting(names: Sequence[str], channels: Sequence[Channel], silence_s: float,
+             silent_s: Sequence[float] | None) -> list[tuple[float, str]]:
     """(how long, why) for each sensor waited for: silent, behind the other, or without a valid sample."""
     if silent_s is not None:
         silent = [(s, f"{n}: no message for {s:.1f} s") for n, s in zip(names, silent_s, strict=True)
@@ -57,7 +57,7 @@ def _waiting(names: tuple[str, str], channels: tuple[Channel, Channel], silence_
             return silent
     lasts = [ch.last_ns for ch in channels]
     known = [t for t in lasts if t is not None]
-    if len(known) == 2:
+    if len(known) == len(channels):
         newest = max(known)
         return [((newest - t) / NS, f"{n}: {(newest - t) / NS:.1f} s behind")
                 for n, t in zip(names, known, strict=True) if newest - t > silence_s * NS]
@@ -74,21 +74,17 @@ def _nothing_yet(name: str, ch: Channel) -> str:
     return f"{name}: {ch.invalid_run} samples invalid since the last valid one ({ch.invalid_reason})"
 
 
-def health_values(channels: tuple[Channel, Channel], resets: int, dropped: Counter[str],
+def health_values(channels: Sequence[Channel], layout: Layout, resets: int, dropped: Counter[str],
                   last: Update | None) -> dict[str, str]:
-    """The diagnostics' key/values: counts, drops per reason, and the last update's."""
-    front, rear = channels
-    values = {
-        "window_fill_pct": f"{(last.window_fill if last else 0.0) * 100:.0f}",
-        "samples_front": str(front.count),
-        "samples_rear": str(rear.count),
-        "missing_front": str(front.missing),  # gaps in the stamps: lost on the way
-        "missing_rear": str(rear.missing),
-        "window_resets": str(resets),
-        "dropped_total": str(sum(dropped.values())),
-    }
+    """The diagnostics' key/values: counts (``samples_front`` …, per channel of ``layout``),
+    drops per reason, and the last update's."""
+    values = {"window_fill_pct": f"{(last.window_fill if last else 0.0) * 100:.0f}"}
+    values |= {f"samples_{c}": str(ch.count) for c, ch in zip(layout.channels, channels, strict=True)}
+    # gaps in the stamps: lost on the way
+    values |= {f"missing_{c}": str(ch.missing) for c, ch in zip(layout.channels, channels, strict=True)}
+    values |= {"window_resets": str(resets), "dropped_total": str(sum(dropped.values()))}
     for reason, n in sorted(dropped.items()):
         values[f"dropped ({reason})"] = str(n)
     if last is not None:
-        values.update(update_values(last))
+        values.update(update_values(last, layout))
     return values

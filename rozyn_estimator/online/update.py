@@ -1,30 +1,47 @@
-"""One scheduled update of the online estimator: pair the window, check it, run the pipeline.
+"""One scheduled update of the online estimator: align the window, check it, run the pipeline.
 
-ROS-free; called by :meth:`OnlineEstimator.compute` outside its lock.
+ROS-free; called by :meth:`OnlineEstimator.compute` outside its lock. The half car's
+update runs :func:`~rozyn_estimator.method.estimate` on its front and rear channels, the
+full car's :func:`~rozyn_estimator.method.full.estimate_full` on its three or four corners.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from rozyn_estimator.method import Estimate, PipelineConfig, estimate
+from rozyn_estimator.method.full import FullEstimate, estimate_full
 from rozyn_estimator.online.config import OnlineConfig
-from rozyn_estimator.online.pairing import pair_channels
-from rozyn_estimator.online.records import ERROR, NS, OK, WARN, Job, Update
+from rozyn_estimator.online.pairing import align_channels
+from rozyn_estimator.online.records import ERROR, HALF_LAYOUT, NS, OK, WARN, Job, Layout, Update
 from rozyn_estimator.vehicle import Vehicle
+from rozyn_estimator.vehicle_full import FullVehicle
 
 
-def compute_update(job: Job, names: tuple[str, str], cfg: OnlineConfig, vehicle: Vehicle,
-                   pipeline: PipelineConfig, warm: Estimate | None) -> Update:
-    """One update: pair the window's channels, check its fill and speed, run the pipeline."""
-    paired = pair_channels(job.front, job.rear, cfg)
+def compute_update(job: Job, names: Sequence[str], cfg: OnlineConfig, vehicle: Vehicle | FullVehicle,
+                   pipeline: PipelineConfig, warm: Estimate | FullEstimate | None,
+                   layout: Layout = HALF_LAYOUT) -> Update:
+    """One update: align the window's channels, check its fill and speed, run the pipeline.
+
+    Args:
+        job: the due window.
+        names: what to call each channel (e.g. its topic).
+        cfg: window and schedule settings.
+        vehicle: the half car or the full car (``layout`` must be its).
+        pipeline: settings of the update.
+        warm: the last published estimate of this window's generation (the warm start).
+        layout: the vehicle model's channels and parameters.
+    """
+    paired = align_channels(job.samples, cfg)
     if isinstance(paired, str):
         return Update(job.due_ns, ERROR, paired)
     t_ns, accel, fs = paired
     fill = min(1.0, (t_ns[-1] - t_ns[0]) / NS / cfg.window_s) if t_ns.size > 1 else 0.0
     stamp = int(t_ns[-1]) if t_ns.size else job.due_ns
     if fill < cfg.min_window_fill:
-        missing = [n for n, ch in zip(names, (job.front, job.rear), strict=True) if ch[0].size == 0]
+        missing = [n for n, ch in zip(names, job.samples, strict=True) if ch[0].size == 0]
         need = f"{cfg.min_window_fill * 100:.0f} % of {cfg.window_s:g} s"
         why = f"waiting for {missing[0]}: no samples in the window" if missing else \
             f"window {fill * 100:.0f} % full (need {need})"
@@ -39,11 +56,18 @@ def compute_update(job: Job, names: tuple[str, str], cfg: OnlineConfig, vehicle:
                           window_fill=fill, fs_hz=fs, speed_mps=mean_speed)
         # one speed per sample: the refinement models the varying wheelbase delay
         speed = np.interp(t_ns.astype(float), job.speed[0].astype(float), s)
-    est = estimate(accel, fs, vehicle, pipeline, speed_mps=speed, warm_start=warm)
+    est: Estimate | FullEstimate
+    if isinstance(vehicle, FullVehicle):
+        mean = None if speed is None else float(np.mean(speed))
+        est = estimate_full(accel, fs, vehicle, pipeline, speed_mps=mean, sensors=layout.channels,
+                            warm=warm if isinstance(warm, FullEstimate) else None)
+    else:
+        est = estimate(accel, fs, vehicle, pipeline, speed_mps=speed,
+                       warm_start=warm if isinstance(warm, Estimate) else None)
     speed_mps = None if speed is None else float(np.mean(speed))
     if not est.ok:
         return Update(stamp, WARN, f"identification failed: {est.reason}", est, fill, fs, speed_mps)
-    if not _publishable(est):  # never publish a made-up number, whatever the pipeline returns
+    if not _publishable(est, layout):  # never publish a made-up number, whatever the pipeline returns
         why = f"the pipeline returned a non-finite or non-positive estimate {est.params} or covariance"
         return Update(stamp, ERROR, f"update failed (internal error, please report): {why}", None, fill, fs,
                       speed_mps)
@@ -51,8 +75,9 @@ def compute_update(job: Job, names: tuple[str, str], cfg: OnlineConfig, vehicle:
     return Update(stamp, WARN if note else OK, note or "estimate published", est, fill, fs, speed_mps)
 
 
-def _publishable(est: Estimate) -> bool:
-    """Finite, positive mass, inertia and CoG distance with a finite covariance."""
-    p, cov = est.params, est.covariance
-    return (p is not None and p.shape == (3,) and bool(np.all(np.isfinite(p)) and np.all(p > 0))
-            and (cov is None or bool(np.all(np.isfinite(cov)))))
+def _publishable(est: Estimate | FullEstimate, layout: Layout) -> bool:
+    """Finite estimates with a finite covariance; mass, inertias and CoG distance positive (the
+    full car's lateral CoG may have either sign)."""
+    p, cov, k = est.params, est.covariance, len(layout.params)
+    return (p is not None and p.shape == (k,) and bool(np.all(np.isfinite(p)))
+            and bool(np.all(p[:layout.positive] > 0)) and (cov is None or bool(np.all(np.isfinite(cov)))))

@@ -27,6 +27,7 @@ import numpy as np
 from rozyn_estimator.bag import BagReader, BagWriter
 from rozyn_estimator.errors import BagError
 from rozyn_estimator.method import PARAM_NAMES, Estimate
+from rozyn_estimator.method.full import FullEstimate
 from rozyn_estimator.online import (
     CUSTOM_DATA_KEY,
     LEVEL_NAMES,
@@ -96,7 +97,7 @@ def utc() -> str:
     return datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
 
 
-def published_estimate(update: Update) -> Estimate | None:
+def published_estimate(update: Update) -> Estimate | FullEstimate | None:
     """The estimate an update published, None when it published none.
 
     Args:
