@@ -21,6 +21,7 @@ def test_json_carries_the_roll_inertia_and_lateral_cog_with_a_labelled_5x5_covar
     assert [r["seed"] for r in records] == [1, 2]
     for r in records:
         assert r["status"] == "ok", r["reason"]
+        assert r["stage"] == "likelihood" and r["refinement"]["status"] == "ok"
         assert r["covariance_layout"] == list(FULL_PARAM_NAMES)
         cov = np.array(r["covariance"])
         assert cov.shape == (5, 5) and np.all(np.linalg.eigvalsh(cov) > 0)
@@ -40,11 +41,9 @@ def test_a_full_car_vehicle_file_is_the_truth(tmp_path, capsys):
     assert r["status"] == "ok" and abs(r["cog_lateral_m"] - 0.06) < 0.1
 
 
-def test_what_the_full_car_cannot_do_yet_is_refused_with_a_reason(capsys):
-    assert main(["trial", "--model", "full", "--method", "likelihood"]) == 1
-    assert "likelihood refinement is not available yet" in capsys.readouterr().err
+def test_what_the_full_car_cannot_do_is_refused_with_a_reason(capsys):
     assert main(["trial", "--model", "full", "--method", "thesis"]) == 1
-    assert "the full car has rozyn" in capsys.readouterr().err
+    assert "the full car has likelihood, rozyn" in capsys.readouterr().err
     assert main(["trial", "--model", "full", "--vehicle", "config/vehicle.yaml"]) == 1
     assert "half-car vehicle file" in capsys.readouterr().err
 

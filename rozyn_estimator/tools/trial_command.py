@@ -46,8 +46,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="white sensor noise as a share of each channel's rms, e.g. 0.1 (default: 0)")
     p.add_argument("--method", choices=tuple(METHODS), default=None,
                    help="estimation method (default: likelihood, the nodes' default: Rozyn's pipeline "
-                        "then the likelihood refinement; rozyn: Rozyn's pipeline alone; with --model "
-                        "full: rozyn)")
+                        "then the likelihood refinement; rozyn: Rozyn's pipeline alone; --model full has "
+                        "likelihood and rozyn)")
     p.add_argument("--model", choices=("half", "full"), default="half",
                    help="half: the half car (front and rear sensors); full: the 7-DOF full car on two road "
                         "tracks, four corner sensors, estimating roll inertia and lateral CoG too "
@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     if args.model == "full":
         from rozyn_estimator.tools import trial_full
 
-        args.method = args.method or "rozyn"
+        args.method = args.method or "likelihood"
         return trial_full.run(args)
     spec = trial_spec(args)
     seeds = parse_seeds(args.seeds if args.seeds is not None else str(args.seed))

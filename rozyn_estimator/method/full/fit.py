@@ -60,6 +60,21 @@ def _series(v: FullVehicle, s: complex, unsprung: bool) -> np.ndarray:
     return zs - zs @ np.linalg.solve(zs + zt, zs)
 
 
+def corner_matrices(v: FullVehicle, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The corners with their wheels condensed exactly, at each of ``s`` (F,): ``(Z, T)``,
+    each (F, 4, 4), with the force on the body at the corners ``F = -Z x_c + T u`` (``u`` the
+    road heights under the wheels): ``N = Z_s + Z_t + m_t s²`` the wheels' dynamic stiffness,
+    ``Z = Z_s - Z_s N⁻¹ Z_s`` and ``T = Z_s N⁻¹ Z_t`` (the likelihood's corners)."""
+    s = np.asarray(s)[:, None]
+    zs = (np.asarray(v.suspension_stiffness_npm) + s * np.asarray(v.suspension_damping_nspm))[:, :, None] \
+        * np.eye(4) + _axle_bars(v)
+    zt_diag = np.asarray(v.tyre_stiffness_npm) + s * np.asarray(v.tyre_damping_nspm)
+    wheel = zt_diag + np.asarray(v.unsprung_mass_kg) * s * s
+    solved = np.linalg.solve(zs + wheel[:, :, None] * np.eye(4), np.concatenate([zs, zt_diag[:, :, None]
+                                                                                 * np.eye(4)], axis=2))
+    return zs - zs @ solved[:, :, :4], zs @ solved[:, :, 4:]
+
+
 def corner_stiffness(v: FullVehicle, s: complex, model: str) -> np.ndarray:
     """(4, 4) complex dynamic stiffness of the corners at pole ``s`` [N/m], the half car's
     three models (:mod:`rozyn_estimator.method.fit`) in matrix form:

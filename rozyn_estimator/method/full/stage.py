@@ -7,7 +7,13 @@ transition matrix's modes (2-2, 2-3), the three body modes (heave, pitch, roll) 
 frequency and damping bands and their amplitude, the linear fit of
 :mod:`rozyn_estimator.method.full.fit`, the delete-one-block jackknife, and the tolerances'
 contributions (:mod:`rozyn_estimator.method.full.budget`): the published covariance is the
-jackknife's plus theirs. The likelihood refinement of the full car is not part of this stage.
+jackknife's plus theirs.
+
+With ``refine="likelihood"`` (the pipeline's default) the likelihood refinement of the full
+car follows (:mod:`rozyn_estimator.method.full.refine`), started from Rozyn's estimate (or
+the previous window's optimum), and its estimate is published: the inverse Fisher
+information plus the tolerances' contributions to it. Rozyn's stage then skips its
+jackknife unless the refinement fails, when Rozyn's estimate is published with a note.
 
 A failure at any step is a ``failed`` status with a reason, never an exception and never a
 number.
@@ -15,6 +21,7 @@ number.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Sequence
@@ -27,6 +34,7 @@ from rozyn_estimator.method.config import PipelineConfig
 from rozyn_estimator.method.correlation import correlation_sums
 from rozyn_estimator.method.full.budget import FullBudget, full_contributions
 from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES, fit_full_inertia
+from rozyn_estimator.method.full.refine import FullRefinement, refine_full
 from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
 from rozyn_estimator.method.pipeline import InputError, checked_window, lag_range
 from rozyn_estimator.method.variance import jackknife_covariance
@@ -50,6 +58,9 @@ class FullEstimate:
     elapsed_ms: float = 0.0
     notes: tuple[str, ...] = ()
     budget: FullBudget | None = None  # the covariance's statistical and systematic parts
+    stage: str = "rozyn"  # whose estimate this is: "rozyn" or "likelihood"
+    rozyn: FullEstimate | None = None  # with a refinement: Rozyn's own estimate (its start)
+    refinement: FullRefinement | None = None  # the likelihood refinement, when one ran
 
     @property
     def ok(self) -> bool:
@@ -61,7 +72,7 @@ class FullEstimate:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: the values by name, the covariance with its labelled layout."""
-        out: dict[str, Any] = {"status": self.status, "reason": self.reason, "stage": "rozyn",
+        out: dict[str, Any] = {"status": self.status, "reason": self.reason, "stage": self.stage,
                                "n_samples": self.n_samples, "elapsed_ms": self.elapsed_ms,
                                "sensors": list(self.sensors), "notes": list(self.notes)}
         for i, name in enumerate(FULL_PARAM_NAMES):
@@ -71,6 +82,11 @@ class FullEstimate:
         out["modes"] = [{"freq_hz": md.freq_hz, "damping_ratio": md.damping_ratio} for md in self.modes]
         if self.budget is not None:
             out["budget"] = self.budget.to_dict()
+        if self.refinement is not None:
+            out["refinement"] = self.refinement.to_dict()
+        if self.rozyn is not None:
+            out["rozyn"] = {name: None if self.rozyn.params is None else float(self.rozyn.params[i])
+                            for i, name in enumerate(FULL_PARAM_NAMES)}
         return out
 
 
@@ -79,7 +95,7 @@ def estimate_full(
     fs_hz: float,
     vehicle: FullVehicle,
     config: PipelineConfig | None = None,
-    speed_mps: float | None = None,
+    speed_mps: float | np.ndarray | None = None,
     sensors: Sequence[str] = CORNERS,
     warm: FullEstimate | None = None,
 ) -> FullEstimate:
@@ -92,20 +108,23 @@ def estimate_full(
         vehicle: the known suspension, tyres, anti-roll bars and geometry, and where each
             accelerometer sits (its inertial values are not used).
         config: the pipeline's settings (bands, lags, stiffness model, jackknife).
-        speed_mps: the vehicle's speed [m/s] when known: the correlation lags shorter than
-            the wheelbase delay are skipped (the rear wheels repeat the front ones' road).
+        speed_mps: the vehicle's speed [m/s] when known, a number or one per sample: the
+            correlation lags shorter than the wheelbase delay are skipped (the rear wheels
+            repeat the front ones' road); the refinement needs it.
         sensors: the corner (``front_left`` …) of each column's accelerometer.
         warm: the previous window's estimate (the refinement's warm start; unused by
             Rozyn's stage).
     """
     cfg = config or PipelineConfig()
+    if cfg.refine == "likelihood":
+        return _refined(accel_mps2, fs_hz, vehicle, cfg, speed_mps, sensors, warm)
     started = time.perf_counter()
     accel = np.asarray(accel_mps2)
     n = int(accel.shape[0]) if accel.ndim >= 1 else 0
     try:
         index = _sensor_indices(sensors)
         y, _ = checked_window(accel, fs_hz, cfg, tuple(sensors))
-        params, cov, modes, notes = _identify(y, fs_hz, vehicle, cfg, speed_mps, index)
+        params, cov, modes, notes = _identify(y, fs_hz, vehicle, cfg, _mean_speed(speed_mps), index)
     except (InputError, IdentificationError, np.linalg.LinAlgError) as exc:
         return FullEstimate(status="failed", reason=str(exc), n_samples=n, sensors=tuple(sensors),
                             elapsed_ms=(time.perf_counter() - started) * 1e3)
@@ -116,6 +135,45 @@ def estimate_full(
     return FullEstimate(status="ok", params=params, covariance=cov, modes=modes, sensors=tuple(sensors),
                         n_samples=n, elapsed_ms=(time.perf_counter() - started) * 1e3, notes=notes,
                         budget=budget)
+
+
+def _refined(
+    accel_mps2: np.ndarray, fs_hz: float, vehicle: FullVehicle, cfg: PipelineConfig,
+    speed_mps: float | np.ndarray | None, sensors: Sequence[str], warm: FullEstimate | None,
+) -> FullEstimate:
+    """Rozyn's stage (without its jackknife) as the start, the refinement, its budget; Rozyn's
+    full stage with a note when the refinement fails."""
+    started = time.perf_counter()
+    try:
+        index = _sensor_indices(sensors)
+        y, _ = checked_window(np.asarray(accel_mps2), fs_hz, cfg, tuple(sensors))
+    except InputError as exc:  # bad input: neither stage can use it
+        return FullEstimate(status="failed", reason=str(exc), sensors=tuple(sensors),
+                            n_samples=int(np.shape(accel_mps2)[0]) if np.ndim(accel_mps2) else 0,
+                            elapsed_ms=(time.perf_counter() - started) * 1e3)
+    rozyn_cfg = dataclasses.replace(cfg, refine="none")
+    quick_cfg = dataclasses.replace(rozyn_cfg, variance="none")
+    quick = estimate_full(y, fs_hz, vehicle, quick_cfg, speed_mps, sensors)
+    ref = refine_full(y, fs_hz, vehicle, index, quick.params, 0.0 if speed_mps is None else speed_mps,
+                      cfg.likelihood, warm=warm.refinement if warm is not None else None)
+    if ref.ok and ref.params is not None and ref.covariance is not None:
+        budget = FullBudget(ref.covariance, ref.contributions) if vehicle.tolerances.any else None
+        return FullEstimate(status="ok", params=ref.params,
+                            covariance=ref.covariance if budget is None else budget.total, modes=quick.modes,
+                            sensors=tuple(sensors), n_samples=quick.n_samples, notes=ref.notes + quick.notes,
+                            budget=budget, stage="likelihood", rozyn=quick, refinement=ref,
+                            elapsed_ms=(time.perf_counter() - started) * 1e3)
+    rozyn = estimate_full(accel_mps2, fs_hz, vehicle, rozyn_cfg, speed_mps, sensors)
+    note = f"likelihood refinement failed ({ref.reason}); publishing the Rozyn estimate"
+    return dataclasses.replace(rozyn, rozyn=quick, refinement=ref, notes=(note, *rozyn.notes),
+                               elapsed_ms=(time.perf_counter() - started) * 1e3)
+
+
+def _mean_speed(speed_mps: float | np.ndarray | None) -> float | None:
+    if speed_mps is None:
+        return None
+    v = np.asarray(speed_mps, dtype=float)
+    return float(v.mean()) if v.size and np.all(np.isfinite(v)) else None
 
 
 def _sensor_indices(sensors: Sequence[str]) -> tuple[int, ...]:

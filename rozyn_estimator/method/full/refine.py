@@ -1,0 +1,263 @@
+"""The full car's likelihood refinement: :func:`refine_full` (a window's maximum-likelihood
+``(m, I_xx, I_yy, l_f, y_c)`` and its covariance, as a :class:`FullRefinement`).
+
+As the half car's (:mod:`rozyn_estimator.method.likelihood.fit`), started from Rozyn's stage
+of the full car: the negative Whittle log-likelihood (:mod:`.whittle`) of the window's
+periodogram matrices in the band is minimised over θ (:mod:`.spectrum`: the five body
+parameters; the road's intensity, waviness and shape; the tracks' coherence scale; a noise
+floor per sensor) by scipy's trust-region method with the analytic gradient and the Fisher
+information as its Hessian (scoring), until the Newton decrement is below ``tol``.
+
+Starts: the previous window's optimum when there is one (warm), else Rozyn's estimate;
+when that gives no finite likelihood, or explains a channel as mostly noise (a wrong
+basin), the best point of a coarse grid of heave, pitch and roll frequencies as well. The
+lower ℓ wins; a result that still explains a channel as mostly noise is refused.
+
+Covariance: the inverse Fisher information, mapped to the physical parameters, times the
+taper's variance factor ``mean(w⁴) / mean(w²)²`` (Dahlhaus 1988: a tapered periodogram's
+ordinates are fewer independent ones), the nuisances' uncertainty included (the inverse of
+the whole information). What the vehicle's tolerances add comes from :mod:`.refine_budget`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import OptimizeResult, minimize
+from scipy.signal import windows
+
+from rozyn_estimator.method.full.refine_budget import refinement_contributions
+from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.whittle import FullWhittle, ridged
+from rozyn_estimator.method.likelihood.config import LikelihoodConfig
+from rozyn_estimator.method.likelihood.spectra import band_power, window_spectra
+from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
+
+_MIN_NOISE = 1e-9  # the model's fixed white floor, share of each channel's band power
+_GROUP_HZ = 0.02  # the periodogram's means span at most this (module docstring)
+_GRID_HZ = {"heave": (0.8, 1.2, 1.8), "pitch": (0.8, 1.2, 1.8), "roll": (1.0, 1.6, 2.5)}
+
+
+@dataclass(frozen=True)
+class FullRefinement:
+    """Result of the full car's likelihood refinement. ``params``/``covariance`` None unless ok."""
+
+    status: str  # "ok" | "failed"
+    reason: str = ""
+    params: np.ndarray | None = None  # (5,) in FULL_PARAM_NAMES order
+    covariance: np.ndarray | None = None  # (5, 5) the statistical part (inverse Fisher, taper factor)
+    theta: np.ndarray | None = None  # all fitted parameters (names in ``names``)
+    names: tuple[str, ...] = ()
+    neg_log_likelihood: float = math.nan  # ℓ at the optimum (constant terms dropped)
+    iterations: int = 0
+    starts: int = 0
+    band_hz: tuple[float, float] = (math.nan, math.nan)
+    noise_std_mps2: tuple[float, ...] = ()  # fitted white sensor noise per channel
+    waviness: float = 2.0
+    coherence_scale: float = 1.0  # the tracks' fitted separation over the front track
+    contributions: dict[str, np.ndarray] = field(default_factory=dict)  # assumed value -> (5,) per 1 u
+    elapsed_ms: float = 0.0
+    notes: tuple[str, ...] = ()
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    def to_dict(self) -> dict[str, object]:
+        return {"status": self.status, "reason": self.reason,
+                "params": None if self.params is None else self.params.tolist(),
+                "neg_log_likelihood": self.neg_log_likelihood, "iterations": self.iterations,
+                "starts": self.starts, "band_hz": list(self.band_hz),
+                "noise_std_mps2": list(self.noise_std_mps2),
+                "waviness": self.waviness, "coherence_scale": self.coherence_scale,
+                "elapsed_ms": self.elapsed_ms, "notes": list(self.notes)}
+
+
+class _FitError(Exception):
+    """The optimum found is not credible (becomes a failed status)."""
+
+
+def refine_full(
+    accel_mps2: np.ndarray, fs_hz: float, vehicle: FullVehicle, sensors: Sequence[int],
+    start: np.ndarray | None, speed_mps: float | np.ndarray, config: LikelihoodConfig | None = None,
+    warm: FullRefinement | None = None,
+) -> FullRefinement:
+    """Maximum-likelihood ``(m, I_xx, I_yy, l_f, y_c)`` of the full car from a window.
+
+    Args:
+        accel_mps2: (n, k) vertical accelerations of the ``sensors``' body points, finite.
+        fs_hz: sample rate [Hz].
+        vehicle: the known corners, bars, geometry and sensor positions.
+        sensors: the corner index (0..3: FL, FR, RL, RR) of each column's accelerometer.
+        start: (5,) the start, e.g. Rozyn's estimate; None for a coarse grid's best point.
+        speed_mps: the speed [m/s], a number or one per sample.
+        config: the refinement's settings (the half car's: band, taper, aliases, road shape,
+            second start, noise share, iterations, tolerance).
+        warm: the previous window's refinement (its θ is the first start).
+    """
+    cfg = config or LikelihoodConfig()
+    started = time.perf_counter()
+    try:
+        result = _refine(np.asarray(accel_mps2, dtype=float), float(fs_hz), vehicle, tuple(sensors), start,
+                         speed_mps, cfg, warm)
+    except _FitError as exc:
+        result = FullRefinement(status="failed", reason=str(exc))
+    except (np.linalg.LinAlgError, ArithmeticError, ValueError) as exc:
+        result = FullRefinement(status="failed", reason=f"likelihood fit: {type(exc).__name__}: {exc}")
+    return dataclasses.replace(result, elapsed_ms=(time.perf_counter() - started) * 1e3)
+
+
+def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, ...],
+            start: np.ndarray | None, speed: float | np.ndarray, cfg: LikelihoodConfig,
+            warm: FullRefinement | None) -> FullRefinement:
+    band = (cfg.band_hz[0], min(cfg.band_hz[1], cfg.max_band_nyquist * fs / 2.0))
+    v = np.atleast_1d(np.asarray(speed, dtype=float))
+    if not (v.size and np.all(np.isfinite(v)) and np.all(v > 0)):
+        raise _FitError("likelihood fit needs a positive speed")
+    if v.size not in (1, y.shape[0]):
+        raise _FitError(f"speed: expected 1 or {y.shape[0]} values, got {v.size}")
+    spectra = window_spectra(y, fs, band, cfg.taper)
+    if spectra.freq_hz.size < 50:
+        raise _FitError(f"too few frequencies in {band[0]:g}-{band[1]:g} Hz")
+    power = band_power(spectra)
+    freq, periodogram, counts = _grouped(spectra.freq_hz, spectra.periodogram,
+                                         max(1, int(_GROUP_HZ * y.shape[0] / fs + 1e-9)))
+    model = FullCarSpectrum(vehicle, sensors, freq, fs, v if v.size > 1 else float(v[0]),
+                            cfg.aliases, f_ref_hz=math.sqrt(band[0] * band[1]),
+                            road_shape_terms=cfg.road_shape_terms, min_noise_psd=_MIN_NOISE * power)
+    objective = FullWhittle(model, periodogram, counts)
+    best: OptimizeResult | None = None
+    iterations = starts = 0
+
+    def run(theta0: np.ndarray) -> None:
+        nonlocal best, iterations, starts
+        res = _minimize(objective, theta0, cfg)
+        iterations, starts = iterations + int(res.nit), starts + 1
+        if np.isfinite(res.fun) and (best is None or res.fun < best.fun):
+            best = res
+
+    if warm is not None and warm.theta is not None and warm.theta.size == model.n_params:
+        run(warm.theta)
+    elif start is not None and _physical(start, vehicle.wheelbase_m):
+        run(_start_theta(model, objective, power, np.asarray(start, dtype=float), cfg.noise_start))
+    if cfg.second_start and (best is None or _noise_share(best.x, model, power).max() > cfg.max_noise_share):
+        run(_grid_start(model, objective, power, vehicle, cfg.noise_start))
+    if best is None or not np.isfinite(best.fun):
+        raise _FitError("likelihood fit: no start gave a finite likelihood")
+    theta = best.x
+    share = _noise_share(theta, model, power)
+    worst = int(np.argmax(share))
+    if share[worst] > cfg.max_noise_share:
+        raise _FitError(f"likelihood fit explains the {CORNERS[sensors[worst]]} channel as mostly noise "
+                        f"({share[worst]:.0%} of its power in the band): a wrong basin or a faulty sensor")
+    params = model.physical(theta)
+    if not 1e-3 * vehicle.wheelbase_m < params[3] < (1 - 1e-3) * vehicle.wheelbase_m:
+        raise _FitError(f"likelihood fit: CoG at the wheelbase's end (lf = {params[3]:.4g} m)")
+    info = objective.fisher(theta)
+    try:
+        theta_cov = np.linalg.inv(info)
+    except np.linalg.LinAlgError as exc:
+        raise _FitError("likelihood fit: singular information (a parameter the data do not "
+                        "determine)") from exc
+    jac = model.physical_jacobian(theta)
+    cov = _taper_factor(y.shape[0], cfg.taper) * jac @ theta_cov @ jac.T
+    if not (np.all(np.isfinite(cov)) and np.all(np.diag(cov) > 0)):
+        raise _FitError("likelihood fit: covariance not positive")
+    contributions = {} if not vehicle.tolerances.any else \
+        refinement_contributions(objective, theta, theta_cov, vehicle)
+    converged = objective.decrement(theta) < cfg.tol
+    notes = () if converged else (f"likelihood fit: not converged in {cfg.max_iter} iterations",)
+    k = model.index
+    return FullRefinement(
+        status="ok", params=params, covariance=0.5 * (cov + cov.T), theta=theta, names=tuple(model.names),
+        neg_log_likelihood=float(best.fun), iterations=iterations, starts=starts, band_hz=band,
+        noise_std_mps2=tuple(np.sqrt(np.exp(theta[model.noise_slice]) * fs).tolist()),
+        waviness=float(theta[k["waviness"]]), coherence_scale=float(np.exp(theta[k["ln_coherence_scale"]])),
+        contributions=contributions, notes=notes)
+
+
+def _grouped(freq_hz: np.ndarray, periodogram: np.ndarray, step: int) -> tuple[np.ndarray, ...]:
+    """(frequencies, periodogram matrices, counts) of the means over ``step`` neighbouring bins:
+    the model is smooth on that scale (``grid_hz``), and the means' Wishart likelihood keeps
+    nearly all the information at a ``step``-th of the work."""
+    if step <= 1:
+        return freq_hz, periodogram, np.ones(freq_hz.size)
+    starts = np.arange(0, freq_hz.size, step)
+    counts = np.diff(np.r_[starts, freq_hz.size]).astype(float)
+    return (np.add.reduceat(freq_hz, starts) / counts,
+            np.add.reduceat(periodogram, starts, axis=0) / counts[:, None, None], counts)
+
+
+def _minimize(objective: FullWhittle, theta0: np.ndarray, cfg: LikelihoodConfig) -> OptimizeResult:
+    """Scoring by scipy's trust-region method until the Newton decrement is below ``tol``."""
+    def stop_when_converged(intermediate_result: OptimizeResult) -> None:
+        if objective.decrement(intermediate_result.x) < cfg.tol:
+            raise StopIteration
+
+    if not np.isfinite(objective.fun(theta0)):
+        return OptimizeResult(x=theta0, fun=math.inf, nit=0)
+    if objective.decrement(theta0) < cfg.tol:
+        return OptimizeResult(x=theta0, fun=objective.fun(theta0), nit=0)
+    return minimize(objective.fun, theta0, jac=objective.jac, hess=objective.hess, method="trust-exact",
+                    callback=stop_when_converged, options={"gtol": 1e-12, "maxiter": cfg.max_iter})
+
+
+def _noise_share(theta: np.ndarray, model: FullCarSpectrum, power: np.ndarray) -> np.ndarray:
+    """Each channel's fitted noise floor, share of its power in the band."""
+    return np.exp(theta[model.noise_slice]) / power
+
+
+def _physical(params: np.ndarray, wheelbase_m: float) -> bool:
+    p = np.asarray(params, dtype=float)
+    return bool(p.shape == (5,) and np.all(np.isfinite(p)) and np.all(p[:3] > 0) and 0 < p[3] < wheelbase_m)
+
+
+def _start_theta(model: FullCarSpectrum, objective: FullWhittle, power: np.ndarray, params: np.ndarray,
+                 noise_share: float) -> np.ndarray:
+    """θ at ``params`` with the road intensity matched to the band's power."""
+    theta = model.theta(params, 1.0, noise_share * power)
+    S, _ = model.spectrum(theta, derivatives=False)
+    floor = noise_share * power + model.min_noise_psd
+    road = (np.einsum("kaa->", S).real - S.shape[0] * floor.sum()) / S.shape[0]
+    theta[model.index["ln_road"]] = math.log(max(float(np.sum(power)) / road, 1e-300)) if road > 0 else 0.0
+    return theta
+
+
+def _grid_start(model: FullCarSpectrum, objective: FullWhittle, power: np.ndarray, v: FullVehicle,
+                noise_share: float) -> np.ndarray:
+    """θ at the best point of a coarse grid: heave, pitch and roll frequencies on the corners'
+    static stiffness (suspension in series with tyre, the bars in roll), CoG at mid-wheelbase."""
+    k = np.array([ks * kt / (ks + kt) for ks, kt in zip(v.suspension_stiffness_npm, v.tyre_stiffness_npm,
+                                                        strict=True)])
+    x, yw = np.asarray(v.corner_x_m), np.asarray(v.corner_y_m)
+    lf = 0.45 * v.wheelbase_m
+    roll = float(k @ yw**2) + v.anti_roll_stiffness_front_nmprad + v.anti_roll_stiffness_rear_nmprad
+    scored: list[tuple[float, int, np.ndarray]] = []
+    for fh in _GRID_HZ["heave"]:
+        for fp in _GRID_HZ["pitch"]:
+            for fr in _GRID_HZ["roll"]:
+                params = np.array([k.sum() / (2 * math.pi * fh) ** 2, roll / (2 * math.pi * fr) ** 2,
+                                   float(k @ (x - lf) ** 2) / (2 * math.pi * fp) ** 2, lf, 0.0])
+                theta = _start_theta(model, objective, power, params, noise_share)
+                nll = objective.nll(model.spectrum(theta, derivatives=False)[0])
+                scored.append((nll, len(scored), theta))
+    finite = sorted(s for s in scored if math.isfinite(s[0]))
+    if not finite:
+        raise _FitError("likelihood fit: no grid point gave a finite likelihood")
+    return finite[0][2]
+
+
+def _taper_factor(n: int, taper: float) -> float:
+    """mean(w⁴)/mean(w²)² of the cosine taper: the tapered Whittle estimate's variance factor."""
+    if taper <= 0:
+        return 1.0
+    w = windows.tukey(n, taper)
+    return float(np.mean(w**4) / np.mean(w**2) ** 2)
+
+
+__all__ = ["FullRefinement", "refine_full", "ridged"]

@@ -1,0 +1,106 @@
+"""What each toleranced value contributes to the full car's refined estimate (GUM type B).
+
+An assumed value ``β`` off by ``δ`` moves the likelihood's optimum by
+``dθ̂ = -F⁻¹ F_θβ δ``, ``F_θβ = Σ_k tr(S⁻¹ ∂_θ S S⁻¹ ∂_β S)`` the information shared between the
+fitted parameters and ``β`` (the expected score's slope in ``β``: the fit absorbs what it can
+of the changed spectrum into θ, the nuisances included). ``∂_β S`` is the model's change
+with the value moved a small step. Per toleranced value: that move times its tolerance,
+mapped to ``(m, I_xx, I_yy, l_f, y_c)``. The keys follow the Rozyn stage's budget
+(:mod:`rozyn_estimator.method.full.budget`): an axle's share applies to both its corners,
+a sensor's position or gain to each sensor on its own (independent errors: one
+contribution each), the time offset to the rear sensors against the front ones.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+
+import numpy as np
+
+from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.whittle import FullWhittle
+from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
+
+_REL_STEP = 1e-5  # share of a value
+_ABS_STEP = 1e-6  # m, s or share of a gain
+_QUADS = {"suspension_stiffness": "suspension_stiffness_npm", "suspension_damping": "suspension_damping_nspm",
+          "tyre_stiffness": "tyre_stiffness_npm", "tyre_damping": "tyre_damping_nspm",
+          "unsprung_mass": "unsprung_mass_kg"}
+_AXLE = {"front": (0, 1), "rear": (2, 3)}
+
+# a move: the step -> (the vehicle moved, a factor per channel (F, k) or None)
+Move = Callable[[float], tuple[FullVehicle, np.ndarray | None]]
+
+
+def refinement_contributions(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndarray,
+                             vehicle: FullVehicle) -> dict[str, np.ndarray]:
+    """Contributions ``c_j`` (5,) of each toleranced value of ``vehicle`` to the refined estimate."""
+    model = objective.model
+    S, _, linv = objective.at(theta)
+    rows = objective.rows(theta)
+    jac = model.physical_jacobian(theta)
+    out: dict[str, np.ndarray] = {}
+    try:
+        for key, tol in vehicle.tolerances.to_dict().items():
+            if tol <= 0:
+                continue
+            for name, step, move in _moves(vehicle, model, key):
+                moved, factor = move(step)
+                model.set_vehicle(moved, factor)
+                dS = (model.spectrum(theta, derivatives=False)[0] - S)[None] / step
+                shared = (rows @ objective.whitened(linv, dS).T)[:, 0]  # F_θβ
+                out[name] = -(jac @ (theta_cov @ shared)) * tol
+    finally:
+        model.set_vehicle(vehicle)
+    return out
+
+
+def _moves(v: FullVehicle, model: FullCarSpectrum, key: str) -> list[tuple[str, float, Move]]:
+    """(contribution name, step, the move) of one tolerance key."""
+    def vehicle(**changes: object) -> tuple[FullVehicle, np.ndarray | None]:
+        return dataclasses.replace(v, **changes), None  # type: ignore[arg-type]
+
+    def scaled(quad: str, corners: tuple[int, ...], h: float) -> tuple[FullVehicle, np.ndarray | None]:
+        values = list(getattr(v, quad))
+        for c in corners:
+            values[c] *= 1.0 + h
+        return vehicle(**{quad: tuple(values)})
+
+    def moved(field: str, corner: int) -> Move:
+        def move(h: float) -> tuple[FullVehicle, np.ndarray | None]:
+            values = list(getattr(v, field))
+            values[corner] += h
+            return vehicle(**{field: tuple(values)})
+        return move
+
+    def channel(columns: list[int], factor: Callable[[float], np.ndarray]) -> Move:
+        def move(h: float) -> tuple[FullVehicle, np.ndarray | None]:
+            out = np.ones((model.omega.size, model.k), dtype=complex)
+            out[:, columns] = factor(h)[:, None]
+            return v, out
+        return move
+
+    sensors = model.sensors
+    axle = "front" if "_front" in key else "rear"
+    quad = next((q for k, q in _QUADS.items() if key.startswith(k)), None)
+    if quad is not None:
+        return [(key, _REL_STEP, lambda h: scaled(quad, _AXLE[axle], h))]
+    if key.startswith("anti_roll"):
+        bar = getattr(v, key)
+        return [] if bar == 0 else [(key, _REL_STEP, lambda h: vehicle(**{key: bar * (1 + h)}))]
+    if key in ("wheelbase_m", "track_front_m", "track_rear_m"):
+        return [(key, _ABS_STEP, lambda h: vehicle(**{key: getattr(v, key) + h}))]
+    if key in ("sensor_front_offset_m", "sensor_rear_offset_m"):
+        return [(f"{key}[{CORNERS[c]}]", _ABS_STEP, moved("sensor_x_m", c))
+                for c in sensors if c in _AXLE[axle]]
+    if key == "sensor_lateral_m":
+        return [(f"{key}[{CORNERS[c]}]", _ABS_STEP, moved("sensor_y_m", c)) for c in sensors]
+    if key.startswith("sensor_gain"):
+        return [(f"{key}[{CORNERS[c]}]", _ABS_STEP,
+                 channel([j], lambda h: np.full(model.omega.size, 1.0 + h, dtype=complex)))
+                for j, c in enumerate(sensors) if c in _AXLE[axle]]
+    if key == "sensor_time_offset_s":
+        rear = [j for j, c in enumerate(sensors) if c in _AXLE["rear"]]
+        return [(key, _ABS_STEP, channel(rear, lambda h: np.exp(-1j * model.omega * h)))]
+    return []

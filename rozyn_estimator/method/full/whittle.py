@@ -1,0 +1,137 @@
+"""The Whittle objective of the full car (:class:`FullWhittle`): ℓ(θ), its gradient and the
+Fisher information for stacks of k×k spectral matrices.
+
+As the half car's (:mod:`rozyn_estimator.method.likelihood.objective`, which is specialised
+to 2×2 for speed), ``ℓ(θ) = Σ_k log det S_k + tr(S_k⁻¹ I_k)`` over the band's Fourier
+frequencies, ``∂_i ℓ = Σ_k tr((S⁻¹ - S⁻¹ I S⁻¹) ∂_i S)`` and the Fisher information
+``F_ij = Σ_k tr(S⁻¹ ∂_i S S⁻¹ ∂_j S)``. With the Cholesky factor ``S = L Lᴴ`` the latter is
+the real inner product of the whitened derivatives ``W_i = L⁻¹ ∂_i S L⁻ᴴ`` (Hermitian):
+``tr(W_i W_j) = Σ W_i ⊙ conj(W_j)`` — one matrix product for all pairs.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+
+
+class FullWhittle:
+    """ℓ(θ), ∇ℓ and the Fisher information of a window's periodogram matrices (cached at the
+    last θ).
+
+    Args:
+        model: the full car's spectral model at the periodograms' frequencies.
+        periodogram: (K, k, k) the window's periodogram matrices (:func:`window_spectra`), or
+            their means over groups of neighbouring bins.
+        counts: (K,) the bins each mean stands for (default: one each): a mean of ``c``
+            bins counts ``c`` times (its Wishart likelihood has ``c`` degrees of freedom).
+    """
+
+    def __init__(self, model: FullCarSpectrum, periodogram: np.ndarray,
+                 counts: np.ndarray | None = None) -> None:
+        self.model, self.periodogram = model, periodogram
+        self.counts = np.ones(periodogram.shape[0]) if counts is None else np.asarray(counts, dtype=float)
+        self._root_counts = np.sqrt(self.counts)[:, None, None]
+        self._key: bytes | None = None
+        self._value: tuple[float, np.ndarray] = (math.inf, np.zeros(model.n_params))
+        self._rows: np.ndarray | None = None
+        self._state: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (S, dS, L⁻¹)
+        self.evaluations = 0
+
+    def nll(self, S: np.ndarray) -> float:
+        """ℓ for a model spectrum ``S`` (inf where it is not positive definite)."""
+        factor = _inverse_cholesky(S)
+        return math.inf if factor is None else self._nll(factor)
+
+    def _nll(self, linv: np.ndarray) -> float:
+        log_det = -2.0 * np.log(np.einsum("kaa->ka", linv).real).sum(axis=1)
+        fit = np.einsum("kaa->k", linv @ self.periodogram @ _h(linv)).real
+        return float(self.counts @ (log_det + fit))
+
+    def evaluate(self, theta: np.ndarray) -> tuple[float, np.ndarray]:
+        """(ℓ, ∇ℓ) at θ; ℓ = inf where S is not positive definite."""
+        key = np.asarray(theta, dtype=float).tobytes()
+        if key == self._key:
+            return self._value
+        self.evaluations += 1
+        S, dS = self.model.spectrum(theta)
+        assert dS is not None
+        linv = _inverse_cholesky(S)
+        self._key, self._rows = key, None
+        if linv is None:
+            self._state, self._value = None, (math.inf, np.zeros(self.model.n_params))
+            return self._value
+        inv = _h(linv) @ linv
+        W = self.counts[:, None, None] * (inv - inv @ self.periodogram @ inv)
+        grad = dS.reshape(dS.shape[0], -1) @ W.swapaxes(1, 2).ravel()  # Σ_k tr(W ∂S)
+        grad = grad.real
+        self._state, self._value = (S, dS, linv), (self._nll(linv), grad)
+        return self._value
+
+    def fun(self, theta: np.ndarray) -> float:
+        return self.evaluate(theta)[0]
+
+    def jac(self, theta: np.ndarray) -> np.ndarray:
+        return self.evaluate(theta)[1]
+
+    def at(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(S, dS/dθ, L⁻¹) at θ (raises ValueError where S is not positive definite)."""
+        self.evaluate(theta)
+        if self._state is None:
+            raise ValueError("the model is not positive definite at θ")
+        return self._state
+
+    def whitened(self, linv: np.ndarray, dS: np.ndarray) -> np.ndarray:
+        """(p, 2 K k²) real rows, ``√c L⁻¹ ∂S L⁻ᴴ``'s real and imaginary parts: ``a @ bᵀ`` is
+        ``Σ c tr(W_a W_b)`` (a real matrix product: numpy's complex one with a conjugate
+        transpose is far slower)."""
+        W = (linv @ dS @ (_h(linv) * self._root_counts)).reshape(dS.shape[0], -1)
+        return np.concatenate([W.real, W.imag], axis=1)
+
+    def rows(self, theta: np.ndarray) -> np.ndarray:
+        """:meth:`whitened` rows of dS/dθ at θ (the Fisher information is ``R Rᵀ``), cached."""
+        _, dS, linv = self.at(theta)
+        if self._rows is None:
+            self._rows = self.whitened(linv, dS)
+        return self._rows
+
+    def fisher(self, theta: np.ndarray) -> np.ndarray:
+        """The Fisher information at θ (identity where S is not positive definite)."""
+        self.evaluate(theta)
+        if self._state is None:
+            return np.eye(self.model.n_params)
+        rows = self.rows(theta)
+        return rows @ rows.T
+
+    def decrement(self, theta: np.ndarray) -> float:
+        """The Newton decrement gᵀF⁻¹g (twice the ℓ a scoring step would still gain)."""
+        _, grad = self.evaluate(theta)
+        return float(grad @ np.linalg.solve(ridged(self.fisher(theta)), grad))
+
+    def hess(self, theta: np.ndarray) -> np.ndarray:
+        """The optimiser's Hessian: the Fisher information (scoring) with a tiny ridge."""
+        return ridged(self.fisher(theta))
+
+
+def ridged(m: np.ndarray) -> np.ndarray:
+    """``m`` plus a ridge of 1e-10 of its largest diagonal entry (flat directions stay still)."""
+    return m + 1e-10 * np.max(np.abs(np.diag(m))) * np.eye(m.shape[0])
+
+
+def _inverse_cholesky(S: np.ndarray) -> np.ndarray | None:
+    """L⁻¹ of ``S = L Lᴴ`` per frequency; None unless every S is finite and positive definite."""
+    if not np.all(np.isfinite(S)):
+        return None
+    try:
+        L = np.linalg.cholesky(S)
+    except np.linalg.LinAlgError:
+        return None
+    eye = np.broadcast_to(np.eye(S.shape[-1]), S.shape)
+    return np.linalg.solve(L, eye)
+
+
+def _h(m: np.ndarray) -> np.ndarray:
+    return m.conj().swapaxes(-1, -2)

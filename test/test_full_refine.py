@@ -1,0 +1,148 @@
+"""The full car's likelihood refinement (method.full.refine): its spectral model against the
+simulator, its derivatives, the fit and its covariance, the warm start, the budget against a
+wrong assumed value, and the fallbacks."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+
+import numpy as np
+import pytest
+
+from rozyn_estimator.method import PipelineConfig
+from rozyn_estimator.method.full import estimate_full
+from rozyn_estimator.method.full.refine import refine_full
+from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
+from sim_node.fullcar import state_space
+from sim_node.road import RoadSpec
+from sim_node.simulation import SimConfig, Simulation
+
+ASYMMETRIC = FullVehicle(
+    cog_lateral_m=0.08, cog_from_front_axle_m=1.3, roll_inertia_kgm2=450.0, track_rear_m=1.56,
+    unsprung_mass_kg=(21.0, 19.0, 34.0, 31.0), suspension_stiffness_npm=(22e3, 24e3, 41e3, 38e3),
+    anti_roll_stiffness_front_nmprad=15_000.0, anti_roll_stiffness_rear_nmprad=6000.0,
+    sensor_x_m=(0.2, 0.1, 2.6, 2.7), sensor_y_m=(0.6, -0.5, 0.7, -0.65),
+)
+EXACT = dataclasses.replace(FullVehicle(), tolerances=FullTolerances.none())
+SPEED_MPS = 100 / 3.6
+
+
+def _truth(v: FullVehicle) -> np.ndarray:
+    return np.array([v.sprung_mass_kg, v.roll_inertia_kgm2, v.pitch_inertia_kgm2, v.cog_from_front_axle_m,
+                     v.cog_lateral_m])
+
+
+def _run(plant: FullVehicle, seed: int, noise: float = 0.1, duration_s: float = 120.0) -> np.ndarray:
+    sim = SimConfig(model="full", full_vehicle=plant, road=RoadSpec(amplitudes="gaussian"), seed=seed)
+    y = Simulation(sim).run(duration_s).accel_mps2
+    return y + np.random.default_rng([seed, 9]).standard_normal(y.shape) * noise * y.std(axis=0)
+
+
+def test_the_model_is_the_simulators_transfer_function():
+    """G = iω P D⁻¹ Bᵀ T per unit road velocity equals the plant's state space (road height
+    in, accelerations out) divided by iω, with every coupling at work."""
+    f = np.linspace(0.3, 20.0, 40)
+    model = FullCarSpectrum(ASYMMETRIC, (0, 1, 2, 3), f, 100.0, 20.0, aliases=0)
+    ss = state_space(ASYMMETRIC)
+    w = 2 * np.pi * f
+    eye = np.eye(ss.a.shape[0])
+    plant = np.array([ss.c @ np.linalg.solve(1j * wi * eye - ss.a, ss.b) + ss.d for wi in w])
+    M, _ = model._mass_matrix(model.theta(_truth(ASYMMETRIC), 1.0, np.ones(4)))
+    D = model.body_stiffness - (w**2)[:, None, None] * M
+    G = model.sensing @ np.linalg.solve(D, model.body_input)
+    assert np.max(np.abs(G * (1j * w)[:, None, None] - plant)) < 1e-9 * np.max(np.abs(plant))
+
+
+def test_the_derivatives_are_the_models_slopes():
+    model = FullCarSpectrum(ASYMMETRIC, (0, 1, 3), np.linspace(0.5, 15.0, 60), 100.0,
+                            np.linspace(15.0, 25.0, 500), aliases=1)
+    theta = model.theta(_truth(ASYMMETRIC), 1e-4, np.full(3, 1e-3))
+    theta[6:10] = [2.2, 0.1, -0.2, 0.3]  # waviness, road shape, coherence scale
+    _, dS = model.spectrum(theta)
+    assert dS is not None
+    for j, name in enumerate(model.names):
+        step = np.zeros_like(theta)
+        step[j] = 1e-6
+        slope = (model.spectrum(theta + step, False)[0] - model.spectrum(theta - step, False)[0]) / 2e-6
+        assert np.max(np.abs(slope - dS[j])) < 1e-6 * np.max(np.abs(dS[j])), name
+
+
+def test_the_refinement_is_far_sharper_than_rozyns_and_its_std_is_true():
+    y = _run(EXACT, seed=5)
+    est = estimate_full(y, 100.0, EXACT, PipelineConfig(), SPEED_MPS)
+    rozyn = estimate_full(y, 100.0, EXACT, PipelineConfig(refine="none"), SPEED_MPS)
+    assert est.ok and est.stage == "likelihood", est.reason
+    assert est.std is not None and rozyn.std is not None
+    z = (est.params - _truth(EXACT)) / est.std
+    assert np.all(np.abs(z) < 4), z
+    assert np.all(est.std < 0.3 * rozyn.std), est.std / rozyn.std
+    assert est.std[0] < 0.01 * 1000 and est.std[4] < 0.005  # 1 % of the mass, 5 mm
+    out = est.to_dict()
+    assert out["stage"] == "likelihood" and out["refinement"]["status"] == "ok"
+    assert out["rozyn"]["mass_kg"] == pytest.approx(est.rozyn.params[0])
+
+
+def test_a_warm_start_on_the_same_window_needs_no_iteration():
+    y = _run(EXACT, seed=6)
+    cold = estimate_full(y, 100.0, EXACT, PipelineConfig(), SPEED_MPS)
+    warm = estimate_full(y, 100.0, EXACT, PipelineConfig(), SPEED_MPS, warm=cold)
+    assert cold.refinement is not None and warm.refinement is not None
+    assert warm.refinement.iterations == 0 and cold.refinement.iterations > 0
+    assert warm.params == pytest.approx(cold.params)
+
+
+def test_three_sensors_and_an_asymmetric_car():
+    plant = dataclasses.replace(ASYMMETRIC, tolerances=FullTolerances.none())
+    y = _run(plant, seed=7)[:, [0, 1, 3]]
+    est = estimate_full(y, 100.0, plant, PipelineConfig(), SPEED_MPS,
+                        sensors=("front_left", "front_right", "rear_right"))
+    assert est.ok and est.stage == "likelihood", est.reason
+    assert est.std is not None
+    assert np.all(np.abs((est.params - _truth(plant)) / est.std) < 4)
+
+
+def test_the_budget_predicts_what_a_wrong_assumed_value_does():
+    """The front springs 5 % stiffer than the vehicle file says, its tolerance 5 %: the
+    estimate moves by the contribution the budget published (first order; opposite sign:
+    the contribution is the assumed value moved by +1 tolerance)."""
+    plant = dataclasses.replace(EXACT, suspension_stiffness_npm=(23_625.0, 23_625.0, 40_000.0, 40_000.0))
+    assumed = dataclasses.replace(FullVehicle(), tolerances=FullTolerances.from_mapping(
+        {"suspension_stiffness_front_npm": 0.05}))
+    y = _run(plant, seed=8)
+    wrong = estimate_full(y, 100.0, assumed, PipelineConfig(), SPEED_MPS)
+    right = estimate_full(y, 100.0, plant, PipelineConfig(), SPEED_MPS)
+    assert wrong.refinement is not None and wrong.budget is not None
+    contribution = wrong.refinement.contributions["suspension_stiffness_front_npm"]
+    shift = wrong.params - right.params
+    for i in (0, 2, 3):  # mass, pitch inertia, CoG: the spring's effect is well above the noise
+        assert shift[i] == pytest.approx(-contribution[i], rel=0.2), i
+    assert "suspension stiffness" in wrong.budget.to_dict()["contributors"]["mass_kg"]
+
+
+def test_without_a_speed_rozyns_estimate_is_published_with_a_note():
+    y = _run(EXACT, seed=5, duration_s=60.0)
+    est = estimate_full(y, 100.0, EXACT, PipelineConfig(), None)
+    assert est.ok and est.stage == "rozyn"
+    assert est.refinement is not None and not est.refinement.ok
+    assert "positive speed" in est.notes[0] and "publishing the Rozyn estimate" in est.notes[0]
+
+
+def test_a_channel_that_is_only_noise_is_refused():
+    y = _run(EXACT, seed=5, duration_s=60.0)
+    y[:, 2] = np.random.default_rng(1).standard_normal(y.shape[0]) * y[:, 2].std()
+    ref = refine_full(y, 100.0, EXACT, (0, 1, 2, 3), _truth(EXACT), SPEED_MPS)
+    assert ref.status == "failed" and "rear_left channel as mostly noise" in ref.reason
+
+
+@pytest.mark.parametrize(("accel", "match"), [
+    (np.zeros((100, 4)), "too short"),
+    (np.full((20_000, 4), np.nan), "NaN"),
+    (np.ones((20_000, 4)), "constant"),
+    (np.ones((20_000, 3)), r"shape \(n, 4\)"),
+])
+def test_bad_input_is_a_failed_status_with_a_reason(accel, match):
+    est = estimate_full(accel, 100.0, FullVehicle(), PipelineConfig(), 27.0)
+    assert est.status == "failed" and est.params is None
+    assert re.search(match, est.reason), est.reason
