@@ -1,6 +1,7 @@
-"""``sim_node``: the half-car simulator as a ROS 2 node (thin glue around ``Simulation``).
+"""``sim_node``: the half-car (or full-car) simulator as a ROS 2 node (thin glue around ``Simulation``).
 
-Publishes front/rear ``sensor_msgs/Imu`` with identical stamps for a pair, the ground
+Publishes front/rear ``sensor_msgs/Imu`` with identical stamps for a pair (the full car,
+when its vehicle is one: four, ``accel/front_left`` … ``accel/rear_right``), the ground
 truth (``sim/ground_truth``, transient local), the speed (``sim/speed``), ``/diagnostics``
 and, in sim-time mode, ``/clock`` at ``real_time_factor`` times real time (0: as fast as
 it can). Blocks of samples are generated on a steady-clock timer, so memory stays
@@ -13,6 +14,7 @@ holds (sim time stands still), so a consumer that falls behind loses nothing.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 import time
@@ -31,7 +33,7 @@ from sensor_msgs.msg import Imu
 
 from rozyn_estimator.parameters import build, check, param
 from rozyn_estimator.ros import glue as ros_common
-from rozyn_estimator.vehicle import config_from_parameters
+from rozyn_estimator.vehicle_full import FullVehicle, any_vehicle_from_parameters
 from sim_node.simulation import SimConfig, Simulation
 
 NS = 1_000_000_000
@@ -52,13 +54,29 @@ class SimNodeOptions:
     rear_topic: str = param("accel/rear", "rear accelerometer topic", read_only=True)
     front_frame_id: str = param("accel_front_link", "frame_id of the front Imu", read_only=True)
     rear_frame_id: str = param("accel_rear_link", "frame_id of the rear Imu", read_only=True)
+    front_left_topic: str = param("accel/front_left", "full car: front left accelerometer topic",
+                                  read_only=True)
+    front_right_topic: str = param("accel/front_right", "full car: front right accelerometer topic",
+                                   read_only=True)
+    rear_left_topic: str = param("accel/rear_left", "full car: rear left accelerometer topic",
+                                 read_only=True)
+    rear_right_topic: str = param("accel/rear_right", "full car: rear right accelerometer topic",
+                                  read_only=True)
+    front_left_frame_id: str = param("accel_front_left_link", "full car: frame_id of the front left Imu",
+                                     read_only=True)
+    front_right_frame_id: str = param("accel_front_right_link", "full car: frame_id of the front right Imu",
+                                      read_only=True)
+    rear_left_frame_id: str = param("accel_rear_left_link", "full car: frame_id of the rear left Imu",
+                                    read_only=True)
+    rear_right_frame_id: str = param("accel_rear_right_link", "full car: frame_id of the rear right Imu",
+                                     read_only=True)
     truth_frame_id: str = param("base_link", "frame_id of the ground truth", read_only=True)
     front_axle_x_m: float = param(0.0, "x of the front axle in truth_frame_id", unit="m", low=-100.0,
                                   high=100.0, read_only=True)
     qos_depth: int = param(100, "publisher queue depth (best effort: sensor-data QoS)", low=1,
                            high=100_000, read_only=True)
     exit_when_done: bool = param(True, "shut down when duration_s has been simulated", read_only=True)
-    wait_for_subscribers: bool = param(False, "start only once both accelerometer topics have a subscriber "
+    wait_for_subscribers: bool = param(False, "start only once every accelerometer topic has a subscriber "
                                        "(so a run on sim time loses nothing to discovery)", read_only=True)
 
     def __post_init__(self) -> None:
@@ -72,6 +90,18 @@ def _time(ns: int) -> Time:
     return Time(sec=int(ns // NS), nanosec=int(ns % NS))
 
 
+def sim_config(values: dict[str, Any]) -> SimConfig:
+    """The simulated run of the node's parameter values: the half car of ``vehicle.*`` or
+    ``vehicle_file``, or the full car (``model: full``) when ``vehicle.model`` is ``full`` or
+    the file says so. Raises ConfigError naming the first invalid parameter."""
+    others = {k: v for k, v in values.items() if not k.startswith("vehicle.")}
+    config: SimConfig = build(NODE_DEFAULTS, others)
+    vehicle = any_vehicle_from_parameters(values)
+    if isinstance(vehicle, FullVehicle):
+        return dataclasses.replace(config, model="full", full_vehicle=vehicle)
+    return dataclasses.replace(config, vehicle=vehicle)
+
+
 class SimNode(Node):
     """The simulator node; raises ConfigError on invalid parameters at start-up."""
 
@@ -80,11 +110,11 @@ class SimNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(self.NAME, **kwargs)
         names = ros_common.declare_config(self, SimNodeOptions())
-        names += ros_common.declare_config(self, NODE_DEFAULTS)
-        names.append(ros_common.declare_vehicle_file(self))
+        names += ros_common.declare_config(self, NODE_DEFAULTS, skip="vehicle.")
+        names += ros_common.declare_vehicle(self)
         values = ros_common.values_of(self, names)
         self.options: SimNodeOptions = build(SimNodeOptions(), values)
-        self.config: SimConfig = config_from_parameters(NODE_DEFAULTS, values)
+        self.config = sim_config(values)
         self.sim = Simulation(self.config)
         o = self.options
         self._sim_mode = o.time_mode == "sim"
@@ -99,9 +129,9 @@ class SimNode(Node):
         sensor_qos = QoSProfile(depth=o.qos_depth, reliability=ReliabilityPolicy.BEST_EFFORT)
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self._pub = (self.create_publisher(Imu, o.front_topic, sensor_qos),
-                     self.create_publisher(Imu, o.rear_topic, sensor_qos))
-        self._msgs = (self._imu_template(o.front_frame_id), self._imu_template(o.rear_frame_id))
+        channels = self.config.channels  # front, rear; or the full car's corners
+        self._pub = [self.create_publisher(Imu, getattr(o, f"{c}_topic"), sensor_qos) for c in channels]
+        self._msgs = [self._imu_template(getattr(o, f"{c}_frame_id")) for c in channels]
         self._pub_speed = self.create_publisher(TwistStamped, "sim/speed", 10)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._pub_truth = self.create_publisher(InertiaStamped, "sim/ground_truth", latched)
@@ -119,7 +149,7 @@ class SimNode(Node):
         self._timer = self.create_timer(period, self._tick, clock=steady)
         self.create_timer(1.0, self._publish_diagnostics, clock=steady)
         r = self.config.road
-        road = f"{r.kind} class {r.road_class} ({r.amplitudes})"
+        road = f"the {self.config.model} car on {r.kind} class {r.road_class} ({r.amplitudes})"
         pace = (f"sim time at {self._rtf:g}x" if self._rtf else "sim time, as fast as possible") \
             if self._sim_mode else "real time"
         c = self.config
@@ -135,7 +165,9 @@ class SimNode(Node):
         return msg
 
     def _publish_truth(self) -> None:
-        v = self.config.vehicle
+        """The plant's values, as the estimator publishes its estimates (the full car's roll
+        inertia in ``ixx``, its lateral CoG in ``com.y``)."""
+        v = self.config.plant_vehicle
         msg = InertiaStamped()
         msg.header.stamp = _time(self._epoch_ns)
         msg.header.frame_id = self.options.truth_frame_id
@@ -144,6 +176,9 @@ class SimNode(Node):
         msg.inertia.com.x = self.options.front_axle_x_m - v.cog_from_front_axle_m
         msg.inertia.com.z = math.nan
         msg.inertia.ixx = msg.inertia.izz = msg.inertia.ixz = math.nan
+        if isinstance(v, FullVehicle):
+            msg.inertia.ixx, msg.inertia.com.y = v.roll_inertia_kgm2, v.cog_lateral_m
+            msg.inertia.iyz = math.nan
         self._pub_truth.publish(msg)
 
     def _due_samples(self) -> int:
@@ -181,15 +216,13 @@ class SimNode(Node):
         stamps = [self._epoch_ns + round(t * NS) for t in block.t_s]
         if self._pub_clock is not None:
             self._pub_clock.publish(ClockMsg(clock=_time(stamps[-1])))
-        front, rear = self._msgs
-        for stamp, (a_f, a_r) in zip(stamps, block.accel_mps2.tolist(), strict=True):
+        pairs = list(zip(self._pub, self._msgs, strict=True))
+        for stamp, row in zip(stamps, block.accel_mps2.tolist(), strict=True):
             t = _time(stamp)
-            front.header.stamp = t
-            front.linear_acceleration.z = a_f
-            rear.header.stamp = t
-            rear.linear_acceleration.z = a_r
-            self._pub[0].publish(front)
-            self._pub[1].publish(rear)
+            for (pub, msg), a in zip(pairs, row, strict=True):
+                msg.header.stamp = t
+                msg.linear_acceleration.z = a
+                pub.publish(msg)
         self.published += n
         speed = TwistStamped()
         speed.header.stamp = _time(stamps[-1])
@@ -209,7 +242,8 @@ class SimNode(Node):
         sim_s = self.published / self.config.rate_hz
         wall_s = time.monotonic() - self._wall_start
         status = DiagnosticStatus(
-            level=DiagnosticStatus.OK, name=self.get_fully_qualified_name(), hardware_id="half_car_sim",
+            level=DiagnosticStatus.OK, name=self.get_fully_qualified_name(),
+            hardware_id=f"{self.config.model}_car_sim",
             message=("finished" if self.finished else "simulating") + f" at t = {sim_s:.1f} s",
             values=[
                 KeyValue(key="road", value=f"{self.config.road.kind} {self.config.road.road_class}"),

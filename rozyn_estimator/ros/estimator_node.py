@@ -1,9 +1,10 @@
 """``estimator_node``: thin rclpy glue around :class:`~rozyn_estimator.online.estimator.OnlineEstimator`.
 
-Subscribes to two ``sensor_msgs/Imu`` topics, feeds the online estimator from the
-callbacks (a dict lookup and a list append per message), runs due updates on a worker
-thread and publishes ``inertia``, ``inertia/covariance`` and ``/diagnostics``. No
-algorithm lives here.
+Subscribes to the accelerometers' ``sensor_msgs/Imu`` topics (the half car's front and rear,
+or the full car's three or four corners when its vehicle is a full car), feeds the online
+estimator from the callbacks (a dict lookup and a list append per message), runs due
+updates on a worker thread and publishes ``inertia``, ``inertia/covariance`` and
+``/diagnostics``. No algorithm lives here.
 
 Stopping (:meth:`EstimatorNode.finish`, called by the spin loop after a signal, and by
 ``destroy_node``) is ordered: under the lock the worker publishes with, the node stops
@@ -71,24 +72,23 @@ class EstimatorNode(Node):
         self.options: NodeOptions = build(NodeOptions(), values)
         self.config = self._config(values)
         cfg = self.config
-        self.online = OnlineEstimator(
-            cfg.vehicle, cfg.online, cfg.pipeline, (cfg.front_topic, cfg.rear_topic)
-        )
+        self.online = OnlineEstimator.from_config(cfg)
         self._getter = ros_io.field_getter(cfg.field, Imu)
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="rozyn-update")
         self._pending: deque[Future[None]] = deque()  # submitted updates, in due order
         self._publish_lock = threading.Lock()  # the worker publishes, and finish() stops, under it
         self._stopping = False
         self._computing: Job | None = None  # the job the worker is on
-        self._arrival = [time.monotonic()] * 2  # when each sensor was last heard (wall clock)
+        sensors = cfg.sensors  # (channel, topic) of each accelerometer
+        self._arrival = [time.monotonic()] * len(sensors)  # when each sensor was last heard (wall clock)
         self.finished = False
         self.updates_published = 0
         self.updates_skipped = 0  # due updates dropped unstarted because the worker was behind
-        self.received = [0, 0]  # Imu messages that reached the callbacks, front and rear
+        self.received = [0] * len(sensors)  # Imu messages that reached the callbacks, per sensor
         self.on_update: Callable[[Update], None] | None = None  # called (in the worker) after publishing
         qos = QoSProfile(depth=self.options.qos_depth, reliability=ReliabilityPolicy.BEST_EFFORT)
         subs = [self.create_subscription(Imu, topic, functools.partial(self._on_imu, k), qos)
-                for k, topic in enumerate((cfg.front_topic, cfg.rear_topic))]
+                for k, (_, topic) in enumerate(sensors)]
         self._subscribe_speed(qos)
         self.pub_inertia = self.create_publisher(InertiaStamped, INERTIA_TOPIC, 10)
         self.pub_covariance = self.create_publisher(Float64MultiArray, COVARIANCE_TOPIC, 10)
@@ -96,15 +96,15 @@ class EstimatorNode(Node):
         self.create_timer(self.options.diagnostics_period_s, self._publish_health)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.get_logger().info(
-            f"estimating from {subs[0].topic_name} and {subs[1].topic_name} ({cfg.field}), window "
-            f"{cfg.online.window_s:g} s, update every {cfg.online.update_period_s:g} s"
+            f"estimating the {cfg.model} car from {', '.join(s.topic_name for s in subs)} ({cfg.field}), "
+            f"window {cfg.online.window_s:g} s, update every {cfg.online.update_period_s:g} s"
         )
 
     # ------------------------------------------------------------ parameters
     def _declare_parameters(self) -> None:
         names = ros_common.declare_config(self, NodeOptions())
-        names += ros_common.declare_config(self, EstimatorConfig())
-        self._param_names = [*names, ros_common.declare_vehicle_file(self)]
+        names += ros_common.declare_config(self, EstimatorConfig(), skip="vehicle.")
+        self._param_names = [*names, *ros_common.declare_vehicle(self)]
 
     def _values(self, changes: Sequence[Parameter] = ()) -> dict[str, Any]:
         values = ros_common.values_of(self, self._param_names)
@@ -123,7 +123,7 @@ class EstimatorNode(Node):
         except ConfigError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         self.config = config
-        self.online.reconfigure(config.vehicle, config.online, config.pipeline)
+        self.online.reconfigure(config.model_vehicle, config.online, config.pipeline)
         return SetParametersResult(successful=True)
 
     # ---------------------------------------------------------------- inputs
@@ -205,7 +205,7 @@ class EstimatorNode(Node):
     def _publish_health(self) -> None:
         now = self.get_clock().now().nanoseconds
         wall = time.monotonic()
-        health = self.online.report(silent_s=(wall - self._arrival[0], wall - self._arrival[1]))
+        health = self.online.report(silent_s=[wall - arrival for arrival in self._arrival])
         values = {**health.values, "updates_skipped": str(self.updates_skipped)}
         health = Health(health.level, health.message, values)
         self.pub_diagnostics.publish(

@@ -23,6 +23,8 @@ from rozyn_estimator import parameters
 from rozyn_estimator.errors import ConfigError, RozynError
 from rozyn_estimator.parameters import Param
 from rozyn_estimator.ros.stop import StopRequest
+from rozyn_estimator.vehicle import Vehicle
+from rozyn_estimator.vehicle_full import MODEL_PARAM, FullVehicle, load_any_vehicle
 
 VEHICLE_FILE_HELP = "vehicle YAML (flat or ROS params); when set it overrides the vehicle.* parameters"
 
@@ -53,21 +55,36 @@ def descriptor(name: str, default: Any, spec: Param) -> ParameterDescriptor:
     return d
 
 
-def declare_config(node: Node, config: Any) -> list[str]:
+def declare_config(node: Node, config: Any, skip: str = "") -> list[str]:
     """Declare every described parameter of a config dataclass (nested ones under their
-    prefixes), with its defaults from ``config``; returns their names."""
+    prefixes), with its defaults from ``config``, except those whose names start with
+    ``skip`` (when given); returns their names."""
     names = []
     for flat in parameters.flatten(config):
+        if skip and flat.name.startswith(skip):
+            continue
         node.declare_parameter(flat.name, flat.value, descriptor(flat.name, flat.value, flat.spec))
         names.append(flat.name)
     return names
 
 
-def declare_vehicle_file(node: Node) -> str:
-    """Declare ``vehicle_file`` (the ``vehicle.*`` parameters come with the node's config)."""
+def declare_vehicle(node: Node) -> list[str]:
+    """Declare ``vehicle_file`` and ``vehicle.model``, then the ``vehicle.*`` parameters of the
+    model they name: the full car's when ``vehicle.model`` is ``full`` or the vehicle file says
+    ``model: full``, else the half car's. Returns their names.
+
+    Raises:
+        ConfigError: the vehicle file cannot be read, or ``vehicle.model`` is not a model.
+    """
     node.declare_parameter("vehicle_file", "", descriptor("vehicle_file", "", Param(VEHICLE_FILE_HELP,
                                                                                       read_only=True)))
-    return "vehicle_file"
+    node.declare_parameter("vehicle.model", "half", descriptor("vehicle.model", "half", MODEL_PARAM))
+    names = ["vehicle_file", "vehicle.model"]
+    values = values_of(node, names)
+    parameters.coerce("vehicle.model", MODEL_PARAM, "half", values["vehicle.model"])
+    full = values["vehicle.model"] == "full" or (
+        bool(values["vehicle_file"]) and isinstance(load_any_vehicle(values["vehicle_file"]), FullVehicle))
+    return names + declare_config(node, FullVehicle() if full else Vehicle())
 
 
 def values_of(node: Node, names: Iterable[str]) -> dict[str, Any]:

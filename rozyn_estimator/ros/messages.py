@@ -7,11 +7,16 @@ Conventions (documented in the README):
   lies ``lf`` behind the front axle). A half car is symmetric about its centre plane, so
   ``com.y = ixy = iyz = 0``; what the half car cannot see is NaN: ``com.z``, ``ixx``,
   ``izz``, ``ixz``.
+- The full car's ``inertia`` adds ``ixx``, the roll inertia [kg m^2], and ``com.y``, the
+  lateral CoG (REP 103: positive left); its model takes x and y as the body's principal
+  axes, so ``ixy = 0``; ``com.z``, ``izz``, ``ixz`` and ``iyz`` are NaN (not seen).
 - ``inertia/covariance`` (std_msgs/Float64MultiArray): the 3x3 covariance, row-major, of
   (mass [kg], pitch inertia [kg m^2], CoG from the front axle [m]); ``layout.dim[0]`` is
   labelled ``"mass_kg,pitch_inertia_kgm2,cog_from_front_axle_m"`` and
   ``layout.dim[1].label`` carries the stamp of the matching ``inertia`` message as
-  ``"stamp=<sec>.<nanosec>"``. It is published right after that message.
+  ``"stamp=<sec>.<nanosec>"``. It is published right after that message. The full car's
+  is 5x5 in the order of ``FULL_PARAM_NAMES``, labelled
+  ``"mass_kg,roll_inertia_kgm2,pitch_inertia_kgm2,cog_from_front_axle_m,cog_lateral_m"``.
 """
 
 from __future__ import annotations
@@ -27,9 +32,11 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PARAM_NAMES
+from rozyn_estimator.method.full import FULL_PARAM_NAMES
 from rozyn_estimator.online import NS, Health, Update
 
 COVARIANCE_LABEL = ",".join(PARAM_NAMES)
+FULL_COVARIANCE_LABEL = ",".join(FULL_PARAM_NAMES)
 
 
 def stamp_ns(stamp: Any) -> int:
@@ -63,31 +70,36 @@ def inertia_msg(update: Update, frame_id: str, front_axle_x_m: float) -> Inertia
     """The published estimate (see the module docstring for the conventions)."""
     if update.params is None:
         raise ValueError("the update has no estimate to publish")
-    m, iyy, lf = (float(x) for x in update.params)
+    params = [float(x) for x in update.params]
     msg = InertiaStamped()
     msg.header.stamp = to_time(update.stamp_ns)
     msg.header.frame_id = frame_id
     inertia = msg.inertia
-    inertia.m = m
-    inertia.iyy = iyy
-    inertia.com.x = front_axle_x_m - lf
-    inertia.com.y = 0.0
     inertia.com.z = math.nan
     inertia.ixx = inertia.izz = inertia.ixz = math.nan
     inertia.ixy = inertia.iyz = 0.0
+    if len(params) == len(FULL_PARAM_NAMES):
+        inertia.m, inertia.ixx, inertia.iyy, lf, inertia.com.y = params
+        inertia.iyz = math.nan
+    else:
+        inertia.m, inertia.iyy, lf = params
+        inertia.com.y = 0.0
+    inertia.com.x = front_axle_x_m - lf
     return msg
 
 
 def covariance_msg(update: Update) -> Float64MultiArray:
-    """3x3 covariance with its labelled layout and the matching stamp."""
+    """The covariance (3x3, or the full car's 5x5) with its labelled layout and the matching stamp."""
+    if update.covariance is None:
+        raise ValueError("the update has no covariance to publish")
+    k = update.covariance.shape[0]
+    label = FULL_COVARIANCE_LABEL if k == len(FULL_PARAM_NAMES) else COVARIANCE_LABEL
     msg = Float64MultiArray()
     t = to_time(update.stamp_ns)
     msg.layout.dim = [
-        MultiArrayDimension(label=COVARIANCE_LABEL, size=3, stride=9),
-        MultiArrayDimension(label=f"stamp={t.sec}.{t.nanosec:09d}", size=3, stride=3),
+        MultiArrayDimension(label=label, size=k, stride=k * k),
+        MultiArrayDimension(label=f"stamp={t.sec}.{t.nanosec:09d}", size=k, stride=k),
     ]
-    if update.covariance is None:
-        raise ValueError("the update has no covariance to publish")
     msg.data = [float(x) for x in update.covariance.ravel()]
     return msg
 

@@ -49,6 +49,10 @@ NODE_NAME = "bag_recorder"
 DEFAULT_TOPICS = (
     "accel/front",
     "accel/rear",
+    "accel/front_left",
+    "accel/front_right",
+    "accel/rear_left",
+    "accel/rear_right",
     "sim/ground_truth",
     "sim/speed",
     "inertia",
@@ -57,6 +61,8 @@ DEFAULT_TOPICS = (
     "/clock",
 )
 NS = 1_000_000_000
+TOPIC_PARAMETERS = ("front_topic", "rear_topic", "front_left_topic", "front_right_topic", "rear_left_topic",
+                    "rear_right_topic")  # the estimator's accelerometer topics
 
 
 @dataclass(frozen=True)
@@ -140,7 +146,7 @@ def estimator_config(values: dict[str, Any], node_name: str, namespace: str) -> 
     config = EstimatorConfig.from_parameters(values)  # the node's own interpretation
     topics = {
         k: expand_topic_name(values[k], node_name, namespace) if values[k] else ""
-        for k in ("front_topic", "rear_topic", "speed_topic")
+        for k in (*TOPIC_PARAMETERS, "speed_topic") if k in values
     }
     return config.replace(**topics, node_name=f"{namespace.rstrip('/')}/{node_name}")
 
@@ -283,9 +289,7 @@ class BagRecorder(Node):
         """Store the estimator's configuration in the bag and record its input topics."""
         self.estimator_config = config
         self.writer.set_custom_data(CUSTOM_DATA_KEY, config.to_json())
-        self._wanted |= {
-            self._resolve(t) for t in (config.front_topic, config.rear_topic, config.speed_topic) if t
-        }
+        self._wanted |= {self._resolve(t) for t in (*(t for _, t in config.sensors), config.speed_topic) if t}
         self.get_logger().info(f"stored the configuration of {config.node_name} in the bag")
 
     # ------------------------------------------------------------------ close

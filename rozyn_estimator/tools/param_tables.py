@@ -27,12 +27,16 @@ VEHICLE_FILE = Flat("vehicle_file", "", Param(
 
 
 def node_parameters() -> dict[str, list[Flat]]:
-    """Table name -> the parameters it lists (the nodes' own, then their shared vehicle)."""
+    """Table name -> the parameters it lists (the nodes' own, then their shared vehicle: the
+    half car's, or with ``vehicle.model`` full the full car's)."""
     from rozyn_estimator.online import EstimatorConfig
     from rozyn_estimator.ros.estimator_node import NodeOptions
     from rozyn_estimator.ros.recorder_node import RecorderOptions
     from rozyn_estimator.vehicle import Vehicle
+    from rozyn_estimator.vehicle_full import MODEL_PARAM, FullVehicle
     from sim_node.node import NODE_DEFAULTS, SimNodeOptions
+
+    model = Flat("vehicle.model", "half", MODEL_PARAM)
 
     def without_vehicle(config: Any) -> list[Flat]:
         return [f for f in flatten(config) if not f.name.startswith("vehicle.")]
@@ -41,7 +45,8 @@ def node_parameters() -> dict[str, list[Flat]]:
         "estimator_node": [*flatten(NodeOptions()), *without_vehicle(EstimatorConfig()), VEHICLE_FILE],
         "sim_node": [*flatten(SimNodeOptions()), *without_vehicle(NODE_DEFAULTS), VEHICLE_FILE],
         "bag_recorder": flatten(RecorderOptions()),
-        "vehicle": flatten(Vehicle()),
+        "vehicle": [model, *flatten(Vehicle())],
+        "vehicle_full": [model, *flatten(FullVehicle())],
     }
 
 
