@@ -146,3 +146,17 @@ def test_bad_input_is_a_failed_status_with_a_reason(accel, match):
     est = estimate_full(accel, 100.0, FullVehicle(), PipelineConfig(), 27.0)
     assert est.status == "failed" and est.params is None
     assert re.search(match, est.reason), est.reason
+
+
+def test_the_budgets_shortcut_keeps_the_contributions(monkeypatch):
+    """The budget sums over every 4th frequency: within 3 % of the sums over every frequency
+    (of each parameter's largest contribution)."""
+    from rozyn_estimator.method.full import refine_budget
+
+    y = _run(FullVehicle(), seed=5)
+    quick = estimate_full(y, 100.0, FullVehicle(), PipelineConfig(), SPEED_MPS).refinement
+    monkeypatch.setattr(refine_budget, "_STEP", 1)
+    full = estimate_full(y, 100.0, FullVehicle(), PipelineConfig(), SPEED_MPS).refinement
+    assert quick is not None and full is not None and quick.contributions.keys() == full.contributions.keys()
+    a, b = np.array(list(quick.contributions.values())), np.array(list(full.contributions.values()))
+    assert np.all(np.abs(a - b) <= 0.03 * np.abs(b).max(axis=0)), np.abs(a - b) / np.abs(b).max(axis=0)

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.polynomial import legendre
@@ -42,6 +43,9 @@ from rozyn_estimator.method.full.fit import corner_matrices
 from rozyn_estimator.method.likelihood.road_input import delay_characteristic
 from rozyn_estimator.vehicle_full import FullVehicle
 
+_CORNER_FIELDS = ("wheelbase_m", "track_front_m", "track_rear_m", "unsprung_mass_kg", "tyre_stiffness_npm",
+                  "tyre_damping_nspm", "suspension_stiffness_npm", "suspension_damping_nspm",
+                  "anti_roll_stiffness_front_nmprad", "anti_roll_stiffness_rear_nmprad")
 BODY_NAMES = ("ln_mass", "ln_roll_inertia", "ln_pitch_inertia", "logit_cog", "cog_lateral_m")
 
 
@@ -68,11 +72,18 @@ class FullCarSpectrum:
         f_ref_hz: the road shape's reference frequency.
         road_shape_terms: smooth departures of the road spectrum from a power law.
         min_noise_psd: (k,) a white floor added to each channel's fitted noise [(m/s²)²/Hz].
+        shape_edges_hz: the band the road shape's polynomials span (default: the grid's).
     """
 
     def __init__(self, vehicle: FullVehicle, sensors: Sequence[int], freq_hz: np.ndarray, fs_hz: float,
                  speed_mps: float | np.ndarray, aliases: int = 1, f_ref_hz: float = 3.0,
-                 road_shape_terms: int = 2, min_noise_psd: np.ndarray | None = None) -> None:
+                 road_shape_terms: int = 2, min_noise_psd: np.ndarray | None = None,
+                 shape_edges_hz: tuple[float, float] | None = None) -> None:
+        self.freq_hz = freq_hz
+        edges_hz = shape_edges_hz or (float(freq_hz.min()), float(freq_hz.max()))
+        self._settings = dict(vehicle=vehicle, sensors=sensors, fs_hz=fs_hz, speed_mps=speed_mps,
+                              aliases=aliases, f_ref_hz=f_ref_hz, road_shape_terms=road_shape_terms,
+                              min_noise_psd=min_noise_psd, shape_edges_hz=edges_hz)
         self.sensors = tuple(sensors)
         self.k = len(self.sensors)
         self.n_freq, self.n_alias = freq_hz.size, 2 * aliases + 1
@@ -80,7 +91,7 @@ class FullCarSpectrum:
         self.omega = 2.0 * np.pi * f
         self.speed_mps = speed_mps
         self.log_shape = np.log(np.abs(f) / f_ref_hz)
-        edges = np.log(np.array([freq_hz.min(), freq_hz.max()]) / f_ref_hz)
+        edges = np.log(np.array(edges_hz) / f_ref_hz)
         x = np.clip((2.0 * self.log_shape - edges.sum()) / (edges[1] - edges[0]), -1.0, 1.0)
         self.shape_basis = np.array([legendre.legval(x, np.eye(road_shape_terms + 2)[d])
                                      for d in range(2, road_shape_terms + 2)]).reshape(road_shape_terms, -1)
@@ -95,15 +106,26 @@ class FullCarSpectrum:
         self.wheelbase_m = vehicle.wheelbase_m  # l_f's scale in θ: kept when the budget moves the vehicle
         self.set_vehicle(vehicle)
 
+    def subset(self, step: int, aliases: int | None = None) -> FullCarSpectrum:
+        """The same model (the same θ) at every ``step``-th frequency, optionally with fewer
+        aliasing terms."""
+        changes: dict[str, Any] = {"vehicle": self.vehicle}
+        if aliases is not None:
+            changes["aliases"] = aliases
+        return FullCarSpectrum(freq_hz=self.freq_hz[::step], **(self._settings | changes))
+
     def set_vehicle(self, vehicle: FullVehicle, channel_factor: np.ndarray | None = None) -> None:
         """(Re)compute what depends on the assumed vehicle and sensors; ``channel_factor``
         (k,) or (F, k) multiplies each channel's response (a sensor's gain or delay)."""
         v = self.vehicle = vehicle
         w = self.omega
-        Z, T = corner_matrices(v, 1j * w)  # (F, 4, 4) each
-        B = np.column_stack([np.ones(4), -np.asarray(v.corner_x_m), np.asarray(v.corner_y_m)])
-        self.body_stiffness = np.einsum("ia,fij,jb->fab", B, Z, B)  # Bᵀ Z B
-        self.body_input = np.einsum("ia,fij->faj", B, T)  # Bᵀ T
+        corners = tuple(getattr(v, name) for name in _CORNER_FIELDS)
+        if corners != getattr(self, "_corners", None):  # the sensors alone moved: the corners stand
+            self._corners = corners
+            Z, T = corner_matrices(v, 1j * w)  # (F, 4, 4) each
+            B = np.column_stack([np.ones(4), -np.asarray(v.corner_x_m), np.asarray(v.corner_y_m)])
+            self.body_stiffness = B.T @ Z @ B  # Bᵀ Z B
+            self.body_input = B.T @ T  # Bᵀ T
         xs, ys = np.asarray(v.sensor_x_m)[list(self.sensors)], np.asarray(v.sensor_y_m)[list(self.sensors)]
         P = np.column_stack([np.ones(self.k), -xs, ys])
         factor = np.ones((w.size, self.k)) if channel_factor is None else \
