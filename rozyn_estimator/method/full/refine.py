@@ -16,7 +16,11 @@ lower ℓ wins; a result that still explains a channel as mostly noise is refuse
 Covariance: the inverse Fisher information, mapped to the physical parameters, times the
 taper's variance factor ``mean(w⁴) / mean(w²)²`` (Dahlhaus 1988: a tapered periodogram's
 ordinates are fewer independent ones), the nuisances' uncertainty included (the inverse of
-the whole information). What the vehicle's tolerances add comes from :mod:`.refine_budget`.
+the whole information), and half way to the score's time blocks' variance
+(:mod:`.blocks`: a road whose roughness changes along the way). What the vehicle's
+tolerances add comes from :mod:`.refine_budget` (a warm update keeps the previous window's
+while its body parameters moved by less than 1 % (1 cm for the lateral CoG): the
+contributions are sensitivities of the model at θ).
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ import numpy as np
 from scipy.optimize import OptimizeResult, minimize
 from scipy.signal import windows
 
+from rozyn_estimator.method.full.blocks import block_factors
 from rozyn_estimator.method.full.refine_budget import refinement_contributions
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.full.whittle import FullWhittle, ridged
@@ -40,6 +45,7 @@ from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
 
 _MIN_NOISE = 1e-9  # the model's fixed white floor, share of each channel's band power
 _GROUP_HZ = 0.02  # the periodogram's means span at most this (module docstring)
+_BUDGET_MOVE = 0.01  # a warm update keeps the budget while ln m, ln I, logit l_f, y_c [m] move less
 _GRID_HZ = {"heave": (0.8, 1.2, 1.8), "pitch": (0.8, 1.2, 1.8), "roll": (1.0, 1.6, 2.5)}
 
 
@@ -61,6 +67,8 @@ class FullRefinement:
     waviness: float = 2.0
     coherence_scale: float = 1.0  # the tracks' fitted separation over the front track
     contributions: dict[str, np.ndarray] = field(default_factory=dict)  # assumed value -> (5,) per 1 u
+    budget_theta: np.ndarray | None = None  # the body parameters θ[:5] the contributions were taken at
+    variance_factors: tuple[float, ...] = ()  # the time blocks' factors on the model's variances
     elapsed_ms: float = 0.0
     notes: tuple[str, ...] = ()
 
@@ -75,6 +83,7 @@ class FullRefinement:
                 "starts": self.starts, "band_hz": list(self.band_hz),
                 "noise_std_mps2": list(self.noise_std_mps2),
                 "waviness": self.waviness, "coherence_scale": self.coherence_scale,
+                "variance_factors": list(self.variance_factors),
                 "elapsed_ms": self.elapsed_ms, "notes": list(self.notes)}
 
 
@@ -168,8 +177,9 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     cov = _taper_factor(y.shape[0], cfg.taper) * jac @ theta_cov @ jac.T
     if not (np.all(np.isfinite(cov)) and np.all(np.diag(cov) > 0)):
         raise _FitError("likelihood fit: covariance not positive")
-    contributions = {} if not vehicle.tolerances.any else \
-        refinement_contributions(objective, theta, theta_cov, vehicle)
+    factors = block_factors(objective, theta, jac @ theta_cov, cov, spectra, y, cfg)
+    cov = np.sqrt(factors)[:, None] * cov * np.sqrt(factors)[None, :]
+    contributions, budget_theta = _contributions(objective, theta, theta_cov, vehicle, warm)
     converged = objective.decrement(theta) < cfg.tol
     notes = () if converged else (f"likelihood fit: not converged in {cfg.max_iter} iterations",)
     k = model.index
@@ -178,7 +188,21 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         neg_log_likelihood=float(best.fun), iterations=iterations, starts=starts, band_hz=band,
         noise_std_mps2=tuple(np.sqrt(np.exp(theta[model.noise_slice]) * fs).tolist()),
         waviness=float(theta[k["waviness"]]), coherence_scale=float(np.exp(theta[k["ln_coherence_scale"]])),
-        contributions=contributions, notes=notes)
+        contributions=contributions, budget_theta=budget_theta, variance_factors=tuple(factors.tolist()),
+        notes=notes)
+
+
+def _contributions(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndarray, vehicle: FullVehicle,
+                   warm: FullRefinement | None) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
+    """The tolerances' contributions and the θ they were taken at: the previous window's when
+    its body parameters were within ``_BUDGET_MOVE`` of these (the contributions are the
+    model's sensitivities at θ, not the data's: they change by about as much as θ does)."""
+    if not vehicle.tolerances.any:
+        return {}, None
+    if warm is not None and warm.budget_theta is not None and warm.contributions and \
+            np.max(np.abs(theta[:5] - warm.budget_theta)) < _BUDGET_MOVE:
+        return warm.contributions, warm.budget_theta
+    return refinement_contributions(objective, theta, theta_cov, vehicle), theta[:5].copy()
 
 
 def _grouped(freq_hz: np.ndarray, periodogram: np.ndarray, step: int) -> tuple[np.ndarray, ...]:

@@ -165,10 +165,19 @@ def _block_variances(objective: WhittleObjective, theta: np.ndarray, combos: np.
     """
     spectra = objective.spectra
     n, fs = spectra.n_samples, spectra.fs_hz
-    n_blocks = int(n / fs // block_s)
-    if spectra.dft is None or n_blocks < _MIN_BLOCKS or accel.shape[0] != n:
+    if spectra.dft is None or int(n / fs // block_s) < _MIN_BLOCKS or accel.shape[0] != n:
         return None
-    psi = _score_series(objective, theta, combos)
+    return series_block_variances(_score_series(objective, theta, combos), accel, fs, block_s, taper)
+
+
+def series_block_variances(psi: np.ndarray, accel: np.ndarray, fs: float, block_s: float,
+                           taper: float) -> np.ndarray | None:
+    """The variances of a score's data terms ``ψ`` (q, n) from its time blocks, for any number
+    of channels (:func:`_block_variances` for why and how); None when there are too few blocks."""
+    n = psi.shape[1]
+    n_blocks = int(n / fs // block_s)
+    if n_blocks < _MIN_BLOCKS or accel.shape[0] != n:
+        return None
     blocks = _partition(n, n_blocks, taper)
     share = blocks.share
     G = np.column_stack([blocks.sums(blocks.weights, row) for row in psi])  # (B, q)
