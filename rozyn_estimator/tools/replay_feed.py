@@ -41,7 +41,11 @@ from rozyn_estimator.tools.replay_outputs import (
     ReplayedUpdate,
     ReplayOutputs,
     ReplayResult,
+    inertia_values,
 )
+
+TOPIC_OPTIONS = ("front_topic", "rear_topic", "front_left_topic", "front_right_topic", "rear_left_topic",
+                 "rear_right_topic", "field", "speed_topic", "speed_topic_type")
 
 
 @dataclass(frozen=True)
@@ -54,6 +58,10 @@ class ReplayOptions:
 
     front_topic: str | None = None
     rear_topic: str | None = None
+    front_left_topic: str | None = None
+    front_right_topic: str | None = None
+    rear_left_topic: str | None = None
+    rear_right_topic: str | None = None
     field: str | None = None
     speed_topic: str | None = None
     speed_topic_type: str | None = None
@@ -152,7 +160,7 @@ def check_options(options: ReplayOptions) -> None:
 def _apply(config: EstimatorConfig, args: ReplayOptions) -> tuple[EstimatorConfig, list[str]]:
     """``config`` with the options' overrides, and the names of what they changed."""
     changes: dict[str, Any] = {}
-    for name in ("front_topic", "rear_topic", "field", "speed_topic", "speed_topic_type"):
+    for name in TOPIC_OPTIONS:
         if getattr(args, name) is not None:
             changes[name] = getattr(args, name)
     online = {
@@ -162,17 +170,22 @@ def _apply(config: EstimatorConfig, args: ReplayOptions) -> tuple[EstimatorConfi
     }
     if online:
         changes["online"] = config.online.replace(**online)
-    if args.vehicle:
-        from rozyn_estimator.vehicle import load_vehicle
+    if args.vehicle:  # a half car's file, or a full car's (model: full): the model follows the file
+        from rozyn_estimator.vehicle_full import FullVehicle, load_any_vehicle
 
-        changes["vehicle"] = load_vehicle(args.vehicle)
+        vehicle = load_any_vehicle(args.vehicle)
+        full = isinstance(vehicle, FullVehicle)
+        changes["full_vehicle"] = vehicle if full else None
+        if not full:
+            changes["vehicle"] = vehicle
     if args.method:
         from rozyn_estimator.method import METHODS
 
         if args.method not in METHODS:
             raise ConfigError(f"--method: must be one of {', '.join(METHODS)}, got {args.method!r}")
         changes["pipeline"] = METHODS[args.method]
-    return config.replace(**changes), sorted({*changes, *online} - {"online"})
+    names = {*changes, *online} - {"online", "full_vehicle"} | ({"vehicle"} if args.vehicle else set())
+    return config.replace(**changes), sorted(names)
 
 
 # ------------------------------------------------------------------- replay
@@ -229,7 +242,7 @@ def replay_reader(
         BagError: a topic is missing or empty, or the bag is damaged.
         ConfigError: a field is missing or not numeric, or a speed topic of another type.
     """
-    topics = [absolute_topic(config.front_topic), absolute_topic(config.rear_topic)]
+    topics = [absolute_topic(t) for _, t in config.sensors]
     infos = [reader.topic(t) for t in topics]
     for info in infos:
         if info.count == 0:
@@ -253,10 +266,9 @@ def replay_reader(
     topics += list(extra)
 
     result = ReplayResult(reader.path, config, "given", damage=reader.damage)
-    online = OnlineEstimator(
-        config.vehicle, config.online, config.pipeline, (config.front_topic, config.rear_topic)
-    )
-    outputs = ReplayOutputs(Path(out_dir), config, reader, write_bag) if out_dir is not None else None
+    online = OnlineEstimator.from_config(config)
+    outputs = ReplayOutputs(Path(out_dir), config, reader, write_bag, online.layout) \
+        if out_dir is not None else None
     total = sum(reader.topics[t].count for t in topics)
     bar = _progress(total, progress)
     try:
@@ -264,7 +276,7 @@ def replay_reader(
         for batch in reader.batches(topics, batch_size):
             bar.update(len(batch))
             a_idx, chan, stamps, values, lost = _accelerations(batch, accel)
-            s_idx, s_stamps, s_values, lost[2] = _speeds(batch, speed)
+            s_idx, s_stamps, s_values, lost[-1] = _speeds(batch, speed, len(accel))
             for c in np.flatnonzero(lost).tolist():  # garbled messages: dropped and counted
                 online.drop(c, "undecodable message", int(lost[c]))
             for name, i in extra.items():
@@ -302,12 +314,13 @@ def replay_reader(
 def _accelerations(
     batch: RawBatch, readers: list[FieldReader]
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Positions in the batch, channels (0 front, 1 rear), stamps [ns] and values of topics 0
-    and 1; and per channel (front, rear, speed: 0) the messages that could not be decoded, left out.
+    """Positions in the batch, channels (topic k: channel k), stamps [ns] and values of the
+    accelerometer topics 0 … k - 1; and per channel (then speed: 0) the messages that could not
+    be decoded, left out.
 
     The stamp is the header's, or the bag time for a type without a header.
     """
-    idx = np.flatnonzero(batch.topic < 2)
+    idx = np.flatnonzero(batch.topic < len(readers))
     chan = batch.topic[idx].astype(np.int64)
     stamps = np.empty(idx.size, np.int64)
     values = np.empty(idx.size)
@@ -318,16 +331,17 @@ def _accelerations(
         stamps[sel] = batch.log_ns[idx[sel]] if decoded.stamps is None else decoded.stamps
         values[sel] = decoded.values[:, 0]
         ok[sel] = decoded.ok
-    lost = np.array([np.sum(~ok & (chan == 0)), np.sum(~ok & (chan == 1)), 0])
+    lost = np.array([*(np.sum(~ok & (chan == c)) for c in range(len(readers))), 0])
     return idx[ok], chan[ok], stamps[ok], values[ok], lost
 
 
-def _speeds(batch: RawBatch, reader: FieldReader | None) -> tuple[np.ndarray, np.ndarray, list[float], int]:
-    """Positions, stamps [ns] and speeds [m/s] of topic 2, the norm computed as the node does;
-    and how many could not be decoded (left out)."""
+def _speeds(batch: RawBatch, reader: FieldReader | None,
+            topic: int) -> tuple[np.ndarray, np.ndarray, list[float], int]:
+    """Positions, stamps [ns] and speeds [m/s] of the speed topic (index ``topic``), the norm
+    computed as the node does; and how many could not be decoded (left out)."""
     if reader is None:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), [], 0
-    idx = np.flatnonzero(batch.topic == 2)
+    idx = np.flatnonzero(batch.topic == topic)
     decoded = reader.decode(batch.messages.take(idx))
     ok = decoded.ok
     speeds = [float((x**2 + y**2) ** 0.5) for x, y in decoded.values[ok].tolist()]  # bit for bit the node's
@@ -356,7 +370,7 @@ def _note_extra(
         msg = reader.deserialize(data, msgtype)
     except BagError:  # garbled: the comparison goes without it
         return
-    values = (msg.inertia.m, msg.inertia.iyy, config.front_axle_x_m - msg.inertia.com.x)
+    values = inertia_values(msg.inertia, config.front_axle_x_m, config.full_vehicle is not None)
     if topic == TRUTH_TOPIC:
         result.truth = values
     else:

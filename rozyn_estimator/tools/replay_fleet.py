@@ -48,8 +48,9 @@ class FleetTask:
 class FleetRow:
     """What one bag gave: a row of the table and of ``fleet.csv``.
 
-    Estimates, their std and the truth are in (m [kg], I_yy [kg m²], l_f [m]) order;
-    ``warnings`` sums up what went wrong short of failing, ``error`` why a bag failed.
+    Estimates, their std and the truth are in (m [kg], I_yy [kg m²], l_f [m]) order (a full
+    car's too: its bag's ``updates.csv`` has its roll inertia and lateral CoG); ``warnings``
+    sums up what went wrong short of failing, ``error`` why a bag failed.
     """
 
     bag: str
@@ -94,7 +95,7 @@ class FleetRow:
             warned_updates=warned,
             estimate=_triple(last.params) if last is not None and last.params is not None else None,
             std=_triple(last.std) if last is not None and last.std is not None else None,
-            truth=result.truth,
+            truth=_triple(result.truth) if result.truth is not None else None,
             warnings="; ".join(notes),
             error="" if updates else f"no update fell due ({result.accel_messages} accelerometer messages)",
             out_dir=str(result.out_dir or ""),
@@ -104,7 +105,9 @@ class FleetRow:
 
 
 def _triple(values: Any) -> tuple[float, float, float]:
-    a, b, c = (float(v) for v in values)
+    """(m, I_yy, l_f) of the half car's three values or the full car's five."""
+    picked = list(values) if len(values) == 3 else [values[0], values[2], values[3]]
+    a, b, c = (float(v) for v in picked)
     return a, b, c
 
 

@@ -7,7 +7,8 @@ the updates come,
 - ``updates.csv``: one row per scheduled update (:data:`CSV_COLUMNS`: stamp, status,
   estimates, std, covariance, modes, window fill, speed, pipeline time, the std's
   statistical and systematic parts with the largest contributors, the model-fit check,
-  glitches gated), numbers at full precision;
+  glitches gated), numbers at full precision; the full car's (:func:`csv_columns` of its
+  layout) has its five parameters, their 5x5 covariance and its three body modes;
 - ``estimates/``: a rosbag2 MCAP bag with ``/inertia``, ``/inertia/covariance`` and
   ``/diagnostics`` as the node would have published them (serialised by rclpy, no
   DDS), logged at the bag time of the message that made each update due.
@@ -26,24 +27,34 @@ import numpy as np
 
 from rozyn_estimator.bag import BagReader, BagWriter
 from rozyn_estimator.errors import BagError
-from rozyn_estimator.method import PARAM_NAMES, Estimate
+from rozyn_estimator.method import Estimate
 from rozyn_estimator.method.full import FullEstimate
 from rozyn_estimator.online import (
     CUSTOM_DATA_KEY,
+    HALF_LAYOUT,
     LEVEL_NAMES,
     NS,
     EstimatorConfig,
     Health,
+    Layout,
     OnlineEstimator,
     Update,
     update_values,
 )
 
-BUDGET_COLUMNS = tuple(f"{name}_{part}" for name in PARAM_NAMES
-                       for part in ("std_statistical", "std_systematic", "budget"))
 TRUTH_TOPIC = "/sim/ground_truth"
 PUBLISHED_TOPIC = "/inertia"
-PARAM_SHORT = ("m", "iyy", "lf")
+SHORT = {"mass_kg": "m", "roll_inertia_kgm2": "ixx", "pitch_inertia_kgm2": "iyy",
+         "cog_from_front_axle_m": "lf", "cog_lateral_m": "yc"}  # the covariance columns' names: cov_m_iyy …
+
+
+def inertia_values(inertia: Any, front_axle_x_m: float, full: bool) -> tuple[float, ...]:
+    """The parameters (a layout's order) of an ``InertiaStamped``'s inertia, as the nodes publish
+    them: (m, I_yy, l_f), or the full car's (m, I_xx, I_yy, l_f, y_c)."""
+    lf = front_axle_x_m - inertia.com.x
+    if full:
+        return inertia.m, inertia.ixx, inertia.iyy, lf, inertia.com.y
+    return inertia.m, inertia.iyy, lf
 
 
 @dataclass(frozen=True)
@@ -66,8 +77,8 @@ class ReplayResult:
     speed_messages: int = 0
     feed_s: float = 0.0
     update_s: float = 0.0
-    truth: tuple[float, float, float] | None = None  # from sim/ground_truth (m, I, lf)
-    recorded: dict[int, tuple[float, float, float]] = field(default_factory=dict)  # stamp -> node's estimate
+    truth: tuple[float, ...] | None = None  # from sim/ground_truth (m, I, lf; the full car's five)
+    recorded: dict[int, tuple[float, ...]] = field(default_factory=dict)  # stamp -> node's estimate
     out_dir: Path | None = None
     out_counts: dict[str, int] = field(default_factory=dict)
     damage: list[str] = field(default_factory=list)
@@ -122,7 +133,8 @@ class ReplayOutputs:
         BagError: ``out_dir`` is not empty, or the bag is asked for and rclpy is missing.
     """
 
-    def __init__(self, out_dir: Path, config: EstimatorConfig, reader: BagReader, write_bag: bool) -> None:
+    def __init__(self, out_dir: Path, config: EstimatorConfig, reader: BagReader, write_bag: bool,
+                 layout: Layout = HALF_LAYOUT) -> None:
         if out_dir.exists() and any(out_dir.iterdir()):
             raise BagError(f"{out_dir} exists and is not empty; choose another --out")
         messages: Callable[[Update, Health, EstimatorConfig], Sequence[tuple[str, bytes]]] | None = None
@@ -136,10 +148,11 @@ class ReplayOutputs:
         out_dir.mkdir(parents=True, exist_ok=True)
         self.out_dir = out_dir
         self.config = config
+        self.layout = layout
         self.counts: dict[str, int] = {}
         self._csv_file = (out_dir / "updates.csv").open("w", newline="")
         self._csv = csv.writer(self._csv_file)
-        self._csv.writerow(CSV_COLUMNS)
+        self._csv.writerow(csv_columns(layout))
         self._messages = messages
         self._bag: BagWriter | None = None
         self._ids: dict[str, int] = {}
@@ -156,7 +169,7 @@ class ReplayOutputs:
             replayed: the update and the bag time of the message that made it due.
             online: the estimator (its diagnostics report goes to ``/diagnostics``).
         """
-        self._csv.writerow(csv_row(replayed))
+        self._csv.writerow(csv_row(replayed, self.layout))
         if self._bag is None or self._messages is None:
             return
         for topic, data in self._messages(replayed.update, online.report(), self.config):
@@ -170,59 +183,70 @@ class ReplayOutputs:
             self.counts = self._bag.counts
 
 
-CSV_COLUMNS = (
-    "stamp_s",
-    "stamp_ns",
-    "bag_time_ns",
-    "status",
-    "published",
-    "message",
-    "mass_kg",
-    "pitch_inertia_kgm2",
-    "cog_from_front_axle_m",
-    "mass_kg_std",
-    "pitch_inertia_kgm2_std",
-    "cog_from_front_axle_m_std",
-    *(f"cov_{a}_{b}" for a in PARAM_SHORT for b in PARAM_SHORT),
-    "stage",
-    "mode1_freq_hz",
-    "mode1_damping",
-    "mode2_freq_hz",
-    "mode2_damping",
-    "window_fill",
-    "sample_rate_hz",
-    "speed_mps",
-    "pipeline_ms",
-    # the published std's parts and largest contributors (issue 10), the model-fit check
-    # and the glitches gated: as /diagnostics says them (online.records.update_values)
-    *BUDGET_COLUMNS,
-    "model_fit_p",
-    "model_fit",
-    "glitches_front",
-    "glitches_rear",
-)
+def csv_columns(layout: Layout = HALF_LAYOUT) -> tuple[str, ...]:
+    """The columns of ``updates.csv`` for a vehicle model (:data:`CSV_COLUMNS`: the half car's)."""
+    names = layout.params
+    short = [SHORT[n] for n in names]
+    return (
+        "stamp_s",
+        "stamp_ns",
+        "bag_time_ns",
+        "status",
+        "published",
+        "message",
+        *names,
+        *(f"{n}_std" for n in names),
+        *(f"cov_{a}_{b}" for a in short for b in short),
+        "stage",
+        *(f"mode{k}_{q}" for k in range(1, layout.modes + 1) for q in ("freq_hz", "damping")),
+        "window_fill",
+        "sample_rate_hz",
+        "speed_mps",
+        "pipeline_ms",
+        # the published std's parts and largest contributors (issue 10), the model-fit check
+        # and the glitches gated: as /diagnostics says them (online.records.update_values)
+        *budget_columns(layout),
+        "model_fit_p",
+        "model_fit",
+        *(f"glitches_{c}" for c in layout.channels),
+    )
 
 
-def csv_row(replayed: ReplayedUpdate) -> list[Any]:
+def budget_columns(layout: Layout = HALF_LAYOUT) -> tuple[str, ...]:
+    """The columns of the budget's parts and contributors."""
+    return tuple(f"{name}_{part}" for name in layout.params for part in ("std_statistical", "std_systematic",
+                                                                          "budget"))
+
+
+CSV_COLUMNS = csv_columns()
+BUDGET_COLUMNS = budget_columns()
+
+
+def csv_row(replayed: ReplayedUpdate, layout: Layout = HALF_LAYOUT) -> list[Any]:
     """One CSV row (floats at full precision; empty where there is no number).
 
     Args:
         replayed: the update and the bag time of its trigger.
+        layout: its vehicle model's.
 
     Returns:
-        The cells in :data:`CSV_COLUMNS` order.
+        The cells in :func:`csv_columns` order.
     """
     u = replayed.update
     est = u.estimate
     published = published_estimate(u)
+    k = len(layout.params)
     values = published.params if published is not None else None
     cov = published.covariance if published is not None else None
-    params: list[Any] = list(values) if values is not None else [""] * 3
-    std: list[Any] = list(np.sqrt(np.diag(cov))) if cov is not None else [""] * 3
+    params: list[Any] = list(values) if values is not None else [""] * k
+    std: list[Any] = list(np.sqrt(np.diag(cov))) if cov is not None else [""] * k
     modes: list[Any] = []
-    for k in range(2):
-        mode = est.modes[k] if est is not None and len(est.modes) > k else None
+    for i in range(layout.modes):
+        mode = est.modes[i] if est is not None and len(est.modes) > i else None
         modes += [mode.freq_hz, mode.damping_ratio] if mode else ["", ""]
+    described = update_values(u, layout)
+    budget = [described.get(c, "") if published is not None else "" for c in budget_columns(layout)]
+    tail = ["model_fit_p", "model_fit", *(f"glitches_{c}" for c in layout.channels)]
     return [
         f"{u.stamp_ns / NS:.9f}",
         u.stamp_ns,
@@ -232,22 +256,16 @@ def csv_row(replayed: ReplayedUpdate) -> list[Any]:
         u.message,
         *(_num(x) for x in params),
         *(_num(x) for x in std),
-        *(_num(x) for x in (cov.ravel() if cov is not None else [""] * 9)),
-        est.stage if est is not None else "",
+        *(_num(x) for x in (cov.ravel() if cov is not None else [""] * k * k)),
+        described.get("stage", ""),
         *(_num(x) for x in modes),
         _num(u.window_fill),
         _num(u.fs_hz),
         _num(u.speed_mps if u.speed_mps is not None else ""),
         _num(est.elapsed_ms if est is not None else ""),
-        *_described(u, published is not None),
+        *budget,
+        *(described.get(c, "") for c in tail),
     ]
-
-
-def _described(u: Update, published: bool) -> list[str]:
-    """The budget (of a published estimate), model-fit and glitch cells, as the diagnostics'."""
-    values = update_values(u)
-    budget = [values.get(c, "") if published else "" for c in BUDGET_COLUMNS]
-    return [*budget, *(values.get(c, "") for c in CSV_COLUMNS[-4:])]
 
 
 def _num(x: Any) -> Any:

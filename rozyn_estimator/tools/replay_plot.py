@@ -3,8 +3,9 @@
 ``rozyn replay`` draws one per bag and ``rozyn demo`` one for its run. Five panels over
 the message time: m, I_yy and l_f, each published estimate with its ±2σ band, the
 ground truth (``/sim/ground_truth``) and the values the node published in the recording
-(``/inertia``) when there are any; then the two body modes' natural frequencies and
-damping ratios. On every panel the updates that failed (no estimate:
+(``/inertia``) when there are any; then the body modes' natural frequencies and damping
+ratios. A full car's (its CSV has ``roll_inertia_kgm2``) has seven: m, I_xx, I_yy, l_f,
+y_c and its three body modes. On every panel the updates that failed (no estimate:
 identification failed, speed varied …) are red lines, those that published with a
 warning orange ones, and the stretches where the window was still filling are shaded.
 
@@ -16,7 +17,7 @@ state): safe in any thread or process.
 from __future__ import annotations
 
 import csv
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -32,6 +33,8 @@ PARAMS = (
     ("pitch_inertia_kgm2", "I_yy", "kg m²"),
     ("cog_from_front_axle_m", "l_f", "m"),
 )
+FULL_PARAMS = (PARAMS[0], ("roll_inertia_kgm2", "I_xx", "kg m²"), *PARAMS[1:], ("cog_lateral_m", "y_c", "m"))
+MODE_COLORS = (("tab:purple", "o"), ("tab:cyan", "s"), ("tab:olive", "^"))
 WALL_CLOCK_S = 1e8  # stamps beyond this (1973) are wall-clock times: plotted from the first one
 FAILED, WARNED, FILLING = "#d62728", "#ff7f0e", "0.85"
 
@@ -57,6 +60,8 @@ class UpdateSeries:
     status: tuple[str, ...]
     published: np.ndarray
     numbers: dict[str, np.ndarray]
+    params: tuple[tuple[str, str, str], ...] = PARAMS  # (column, symbol, unit), the layout's order
+    modes: int = 2
 
     def column(self, name: str) -> np.ndarray:
         return self.numbers.get(name, np.full(self.stamp_s.size, np.nan))
@@ -72,9 +77,13 @@ def read_updates(path: Path) -> UpdateSeries:
         Its updates in file order.
     """
     with path.open(newline="") as f:
-        rows = list(csv.DictReader(f))
-    wanted = [f"{p}{s}" for p, _, _ in PARAMS for s in ("", "_std")]
-    wanted += [f"mode{k}_{q}" for k in (1, 2) for q in ("freq_hz", "damping")]
+        reader = csv.DictReader(f)
+        rows = list(reader)
+        columns = reader.fieldnames or []
+    params = FULL_PARAMS if "roll_inertia_kgm2" in columns else PARAMS
+    modes = 3 if "mode3_freq_hz" in columns else 2
+    wanted = [f"{p}{s}" for p, _, _ in params for s in ("", "_std")]
+    wanted += [f"mode{k}_{q}" for k in range(1, modes + 1) for q in ("freq_hz", "damping")]
     numbers = {
         name: np.array([_float(r.get(name, "")) for r in rows]) for name in wanted if rows and name in rows[0]
     }
@@ -83,6 +92,8 @@ def read_updates(path: Path) -> UpdateSeries:
         status=tuple(r["status"] for r in rows),
         published=np.array([r["published"] == "1" for r in rows], dtype=bool),
         numbers=numbers,
+        params=params,
+        modes=modes,
     )
 
 
@@ -97,8 +108,8 @@ def plot_estimates(
     updates_csv: Path,
     png: Path,
     *,
-    truth: tuple[float, float, float] | None = None,
-    recorded: Mapping[int, tuple[float, float, float]] | None = None,
+    truth: Sequence[float] | None = None,
+    recorded: Mapping[int, Sequence[float]] | None = None,
     title: str = "",
 ) -> Path:
     """Draw ``png`` from ``updates_csv``.
@@ -106,8 +117,9 @@ def plot_estimates(
     Args:
         updates_csv: the run's ``updates.csv``.
         png: the figure to write.
-        truth: the true (m, I_yy, l_f), when known.
-        recorded: the node's published (m, I_yy, l_f) by stamp [ns], when the bag holds them.
+        truth: the true (m, I_yy, l_f) (a full car's five), when known.
+        recorded: the node's published (m, I_yy, l_f) (the full car's five) by stamp [ns], when
+            the bag holds them.
         title: the figure's title (e.g. the bag's name).
 
     Returns:
@@ -121,11 +133,12 @@ def plot_estimates(
     series = read_updates(updates_csv)
     t0 = _origin(series.stamp_s, recorded)
     t = series.stamp_s - t0
-    fig = Figure(figsize=(10, 12), dpi=100, layout="constrained")
-    axes = fig.subplots(5, 1, sharex=True)
-    for index, (ax, (name, symbol, unit)) in enumerate(zip(axes, PARAMS, strict=False)):
+    panels = len(series.params) + 2
+    fig = Figure(figsize=(10, 2.4 * panels), dpi=100, layout="constrained")
+    axes = fig.subplots(panels, 1, sharex=True)
+    for index, (ax, (name, symbol, unit)) in enumerate(zip(axes, series.params, strict=False)):
         _parameter_panel(ax, series, t, name, f"{symbol} [{unit}]", index, truth, recorded, t0)
-    _modes_panels(axes[3], axes[4], series, t)
+    _modes_panels(axes[-2], axes[-1], series, t)
     for ax in axes:
         _mark_statuses(ax, series, t)
     handles: dict[str, Any] = {}
@@ -141,7 +154,7 @@ def plot_estimates(
     return png
 
 
-def _origin(stamp_s: np.ndarray, recorded: Mapping[int, tuple[float, float, float]] | None) -> float:
+def _origin(stamp_s: np.ndarray, recorded: Mapping[int, Sequence[float]] | None) -> float:
     """0 for sim time; the first stamp (whole seconds) for wall-clock stamps."""
     first = [float(np.nanmin(stamp_s))] if stamp_s.size else []
     first += [min(recorded) / 1e9] if recorded else []
@@ -150,8 +163,8 @@ def _origin(stamp_s: np.ndarray, recorded: Mapping[int, tuple[float, float, floa
 
 
 def _parameter_panel(ax: Axes, series: UpdateSeries, t: np.ndarray, name: str, ylabel: str, index: int,
-                     truth: tuple[float, float, float] | None,
-                     recorded: Mapping[int, tuple[float, float, float]] | None, t0: float) -> None:
+                     truth: Sequence[float] | None, recorded: Mapping[int, Sequence[float]] | None,
+                     t0: float) -> None:
     value, std = series.column(name), series.column(f"{name}_std")
     ok = series.published & np.isfinite(value)
     if ok.any():
@@ -170,7 +183,7 @@ def _parameter_panel(ax: Axes, series: UpdateSeries, t: np.ndarray, name: str, y
 
 
 def _modes_panels(freq_ax: Axes, damping_ax: Axes, series: UpdateSeries, t: np.ndarray) -> None:
-    for k, (color, marker) in ((1, ("tab:purple", "o")), (2, ("tab:cyan", "s"))):
+    for k, (color, marker) in enumerate(MODE_COLORS[: series.modes], start=1):
         freq_ax.plot(t, series.column(f"mode{k}_freq_hz"), marker, color=color, markersize=3,
                      label=f"body mode {k}")
         damping_ax.plot(t, series.column(f"mode{k}_damping"), marker, color=color, markersize=3)

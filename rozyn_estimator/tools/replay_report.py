@@ -31,8 +31,8 @@ def format_summary(result: ReplayResult) -> str:
     """
     cfg = result.config
     lines = [
-        f"replayed {result.bag}: {result.accel_messages} accelerometer messages "
-        f"({absolute_topic(cfg.front_topic)}, {absolute_topic(cfg.rear_topic)}, {cfg.field})"
+        f"replayed {result.bag} ({cfg.model} car): {result.accel_messages} accelerometer messages "
+        f"({', '.join(absolute_topic(t) for _, t in cfg.sensors)}, {cfg.field})"
         + (
             f" and {result.speed_messages} speed messages ({absolute_topic(cfg.speed_topic)})"
             if cfg.speed_topic
@@ -54,12 +54,12 @@ def format_summary(result: ReplayResult) -> str:
     if published:
         p = np.array([params for _, params in published])
         lines.append(f"{'mean over updates':<22}" + "".join(f"{x:>24.6g}" for x in p.mean(axis=0)))
-        if result.truth is not None:
-            err = (p[-1] / np.array(result.truth) - 1) * 100
+        if result.truth is not None and len(result.truth) == p.shape[1]:
             lines.append(
                 f"{'truth (' + TRUTH_TOPIC + ')':<22}" + "".join(f"{x:>24.6g}" for x in result.truth)
             )
-            lines.append(f"{'last vs truth':<22}" + "".join(f"{e:>+23.2f}%" for e in err))
+            lines.append(f"{'last vs truth':<22}" + "".join(_error(x, t, name) for x, t, name in zip(
+                p[-1], result.truth, _columns(p.shape[1]), strict=True)))
     if result.recorded:
         lines.append(_against_recorded(result))
     if result.out_dir is not None:
@@ -84,11 +84,25 @@ def _published_params(result: ReplayResult) -> list[tuple[int, np.ndarray]]:
     return out
 
 
+HALF_COLUMNS = ("mass [kg]", "pitch inertia [kg m2]", "CoG from front [m]")
+FULL_COLUMNS = ("mass [kg]", "roll inertia [kg m2]", "pitch inertia [kg m2]", "CoG from front [m]",
+                "CoG left [m]")
+
+
+def _columns(k: int) -> tuple[str, ...]:
+    return FULL_COLUMNS if k == len(FULL_COLUMNS) else HALF_COLUMNS
+
+
+def _error(value: float, truth: float, column: str) -> str:
+    """The last estimate against the truth: in % of it, the lateral CoG (often 0) in m."""
+    if column == FULL_COLUMNS[-1]:
+        return f"{f'{value - truth:+.4f} m':>24}"
+    return f"{(value / truth - 1) * 100:>+23.2f}%"
+
+
 def _table(result: ReplayResult, max_rows: int = 24) -> str:
-    head = (
-        f"{'stamp [s]':>12}  {'status':<6}{'mass [kg]':>24}{'pitch inertia [kg m2]':>24}"
-        f"{'CoG from front [m]':>24}"
-    )
+    head = f"{'stamp [s]':>12}  {'status':<6}" + "".join(
+        f"{c:>24}" for c in _columns(5 if result.config.model == "full" else 3))
     rows = [head]
     updates = result.updates
     shown = updates if len(updates) <= max_rows else updates[-max_rows:]
@@ -98,7 +112,7 @@ def _table(result: ReplayResult, max_rows: int = 24) -> str:
         u = ru.update
         est = published_estimate(u)
         if est is not None and est.params is not None:
-            std = est.std if est.std is not None else np.full(3, np.nan)
+            std = est.std if est.std is not None else np.full(len(est.params), np.nan)
             cells = "".join(f"{f'{v:.6g} ± {s:.3g}':>24}" for v, s in zip(est.params, std, strict=True))
         else:
             cells = f"  {u.message if len(u.message) <= 90 else u.message[:89] + '…'}"
@@ -112,7 +126,9 @@ def _against_recorded(result: ReplayResult) -> str:
     common = sorted(set(replayed) & set(result.recorded))
     if not common:
         return f"no stamp of the {len(result.recorded)} estimates on {PUBLISHED_TOPIC} is in the replay"
-    rel = max(float(np.max(np.abs(np.array(result.recorded[s]) / replayed[s] - 1))) for s in common)
+    # relative, and absolute where the replay's value is 0 (a lateral CoG on the centreline)
+    rel = max(float(np.max(np.abs(np.array(result.recorded[s]) - replayed[s])
+                           / np.where(replayed[s] != 0, np.abs(replayed[s]), 1.0))) for s in common)
     text = (
         f"against the {len(result.recorded)} estimates recorded on {PUBLISHED_TOPIC}: {len(common)} at "
         f"the same stamps, max relative difference {rel:.1e}"
