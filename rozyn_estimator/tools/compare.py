@@ -154,6 +154,10 @@ def case_record(case: Case, results: dict[str, list[TrialResult]]) -> list[dict[
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--model", choices=("half", "full"), default="half",
+                   help="half (default) or full: the 7-DOF full car on two road tracks (methods likelihood "
+                        "and rozyn; --suite acceptance: issue 13's cases; --vehicle a full-car file or "
+                        "--vehicle-preset table5-1 / second)")
     p.add_argument("--suite", choices=SUITES,
                    help="run a named set of cases (overrides the road and sensor options)")
     p.add_argument("--methods", default=",".join(DEFAULT_METHODS),
@@ -200,6 +204,11 @@ def _base_spec(args: argparse.Namespace) -> TrialSpec:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.model == "full":
+        from rozyn_estimator.tools import compare_full
+
+        args.methods_defaulted = args.methods == ",".join(DEFAULT_METHODS)
+        return compare_full.run(args)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     if not methods:
         raise ConfigError(f"methods: none given; known: {', '.join(METHODS)}")

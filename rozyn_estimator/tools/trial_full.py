@@ -89,8 +89,9 @@ def spec_from_args(args: argparse.Namespace) -> FullTrialSpec:
     return FullTrialSpec(sim=sim, noise_fraction=args.noise_fraction, method=args.method)
 
 
-def run_full_trial(spec: FullTrialSpec, seed: int) -> FullTrialResult:
-    """Simulate one seeded full-car run (relative noise from its own stream) and estimate."""
+def simulate_full(spec: FullTrialSpec, seed: int) -> tuple[np.ndarray, np.ndarray, tuple[str, ...], float]:
+    """One seeded full-car run with its relative noise (from its own stream): (accelerations
+    (n, 4), speed per sample [m/s], the channels' corners, the time it took [ms])."""
     started = time.perf_counter()
     sim = dataclasses.replace(spec.sim, seed=seed)
     block = Simulation(sim).run(sim.duration_s)
@@ -99,9 +100,13 @@ def run_full_trial(spec: FullTrialSpec, seed: int) -> FullTrialResult:
         rms = accel.std(axis=0)
         noise = np.random.default_rng([seed, 3]).standard_normal(accel.shape)
         accel = accel + noise * (spec.noise_fraction * rms)
-    sim_ms = (time.perf_counter() - started) * 1e3
-    est = estimate_full(accel, sim.rate_hz, spec.vehicle, METHODS[spec.method], block.speed_mps,
-                        sensors=block.channels)
+    return accel, block.speed_mps, tuple(block.channels), (time.perf_counter() - started) * 1e3
+
+
+def run_full_trial(spec: FullTrialSpec, seed: int) -> FullTrialResult:
+    """Simulate one seeded full-car run and estimate."""
+    accel, speed, channels, sim_ms = simulate_full(spec, seed)
+    est = estimate_full(accel, spec.sim.rate_hz, spec.vehicle, METHODS[spec.method], speed, sensors=channels)
     return FullTrialResult(seed, est, spec.truth, sim_ms)
 
 

@@ -81,9 +81,10 @@ class FullCarSpectrum:
                  shape_edges_hz: tuple[float, float] | None = None) -> None:
         self.freq_hz = freq_hz
         edges_hz = shape_edges_hz or (float(freq_hz.min()), float(freq_hz.max()))
-        self._settings = dict(vehicle=vehicle, sensors=sensors, fs_hz=fs_hz, speed_mps=speed_mps,
-                              aliases=aliases, f_ref_hz=f_ref_hz, road_shape_terms=road_shape_terms,
-                              min_noise_psd=min_noise_psd, shape_edges_hz=edges_hz)
+        self._settings: dict[str, Any] = dict(  # what subset() rebuilds the model from
+            vehicle=vehicle, sensors=sensors, fs_hz=fs_hz, speed_mps=speed_mps, aliases=aliases,
+            f_ref_hz=f_ref_hz, road_shape_terms=road_shape_terms, min_noise_psd=min_noise_psd,
+            shape_edges_hz=edges_hz)
         self.sensors = tuple(sensors)
         self.k = len(self.sensors)
         self.n_freq, self.n_alias = freq_hz.size, 2 * aliases + 1
