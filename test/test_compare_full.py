@@ -1,0 +1,96 @@
+"""``rozyn compare --model full``: the full car's methods side by side, its summaries and its
+acceptance suite (the 100-seed run is slow-marked)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from rozyn_estimator.method.full import FULL_PARAM_NAMES, FullEstimate
+from rozyn_estimator.tools.cli import main
+from rozyn_estimator.tools.compare_full import (
+    FULL_PRESETS,
+    FullBars,
+    acceptance_cases,
+    compare_full,
+    summarise_full,
+)
+
+TRUTH = np.array([1000.0, 400.0, 2000.0, 1.2, 0.0])
+
+
+def _estimate(params: list[float], std: list[float]) -> FullEstimate:
+    return FullEstimate(status="ok", params=np.array(params), covariance=np.diag(np.square(std)),
+                        elapsed_ms=5.0)
+
+
+def test_the_summary_counts_bias_coverage_and_failures():
+    estimates = [_estimate([1010.0, 400.0, 2000.0, 1.2, 0.004], [10.0, 1.0, 1.0, 0.01, 0.001]),
+                 _estimate([1000.0, 410.0, 2000.0, 1.2, 0.002], [10.0, 1.0, 1.0, 0.01, 0.001]),
+                 FullEstimate(status="failed", reason="no modes")]
+    s = summarise_full(estimates, TRUTH)
+    assert s.n == 3 and s.failures == 1
+    assert s.bias[0] == pytest.approx(0.5) and s.bias[1] == pytest.approx(1.25)
+    assert s.bias[4] == pytest.approx(0.003)  # metres, not per cent
+    assert s.coverage_95.tolist() == [1.0, 0.5, 1.0, 1.0, 0.0]
+    missed = s.missed(FullBars())
+    assert "failures 1/3" in missed and any(m.startswith("bias roll_inertia_kgm2") for m in missed)
+    assert any(m.startswith("coverage cog_lateral_m") for m in missed)
+    assert not any(m.startswith("bias pitch_inertia") for m in missed)
+    assert "coverage pitch_inertia_kgm2 1.00" in missed  # 100 %: too wide is missed too
+
+
+def test_the_acceptance_cases_are_the_issues_on_the_exact_vehicle():
+    cases = acceptance_cases(FULL_PRESETS["second"])
+    assert [c.spec.sim.speed_kmh for c in cases] == [30.0, 50.0, 70.0, 100.0, 100.0]
+    assert [c.spec.sim.road.kind for c in cases] == ["iso"] * 4 + ["laplace"]
+    for c in cases:
+        assert c.spec.noise_fraction == 0.1 and c.spec.sim.duration_s == 120.0
+        assert not c.spec.vehicle.tolerances.any and c.spec.truth[0] == 1800.0
+
+
+def test_every_method_sees_the_same_runs():
+    spec = acceptance_cases(FULL_PRESETS["table5-1"])[3].spec
+    results = compare_full(spec, ["rozyn", "likelihood"], [1, 2], jobs=1)
+    assert [e.stage for e in results["likelihood"]] == ["likelihood"] * 2
+    for a, b in zip(results["rozyn"], results["likelihood"], strict=True):
+        assert a.ok and b.ok and a.n_samples == b.n_samples
+        assert b.refinement is not None and b.rozyn is not None
+        assert b.rozyn.params is not None and a.params is not None
+        assert b.rozyn.params == pytest.approx(a.params)  # the start: Rozyn's on the same samples
+
+
+def test_the_cli_prints_json_records_per_method(capsys):
+    assert main(["compare", "--model", "full", "--seeds", "1-2", "--duration-s", "60", "--noise", "0.1",
+                 "--format", "json", "--quiet", "--jobs", "1"]) == 0
+    records = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [r["method"] for r in records] == ["rozyn", "likelihood"]
+    for r in records:
+        assert r["model"] == "full" and r["n"] == 2 and list(r["coverage_95"]) == list(FULL_PARAM_NAMES)
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--damper-ratio", "2"], "--damper-ratio: not available with --model full"),
+    (["--methods", "thesis"], "the full car has likelihood, rozyn"),
+    (["--suite", "mismatch"], "--model full has the acceptance suite"),
+    (["--vehicle", "config/vehicle.yaml"], "half-car vehicle file"),
+])
+def test_what_the_full_car_cannot_compare_is_refused(argv, message, capsys):
+    assert main(["compare", "--model", "full", "--seeds", "1", "--quiet", *argv]) == 1
+    assert message in capsys.readouterr().err
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("preset", ["table5-1", "second"])
+def test_acceptance_100_seeds(preset):
+    """Issue 13's acceptance: every case's bias, 95 % coverage and failures within the bars."""
+    missed = {}
+    for case in acceptance_cases(FULL_PRESETS[preset]):
+        results = compare_full(case.spec, ["likelihood"], range(1, 101))
+        s = summarise_full(results["likelihood"], case.spec.truth)
+        assert case.bars is not None
+        if s.missed(case.bars):
+            missed[case.label] = s.missed(case.bars)
+    assert not missed, missed
