@@ -18,6 +18,7 @@ from typing import Any
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.online.config import OnlineConfig
+from rozyn_estimator.online.records import Layout, layout_of
 from rozyn_estimator.parameters import build, check, param
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.vehicle import Vehicle
@@ -90,6 +91,11 @@ class EstimatorConfig:
     def model_vehicle(self) -> Vehicle | FullVehicle:
         """The vehicle the estimator runs: the full car when set, else the half car."""
         return self.vehicle if self.full_vehicle is None else self.full_vehicle
+
+    @property
+    def layout(self) -> Layout:
+        """The channels and parameters of the estimator's updates."""
+        return layout_of(self.model_vehicle, [c for c, _ in self.sensors])
 
     @property
     def sensors(self) -> tuple[tuple[str, str], ...]:

@@ -192,11 +192,13 @@ def update_values(update: Update, layout: Layout = HALF_LAYOUT) -> dict[str, str
 
 
 def _refinement_values(ref: Any, channels: Sequence[str]) -> dict[str, str]:
-    """The refinement's model-fit check, fitted waviness, sensor noise and iterations."""
+    """The refinement's model-fit check, fitted waviness, sensor noise and iterations (the
+    half car's refinement has them all; the full car's what it has)."""
     out = {}
-    if ref is not None and ref.model_fit is not None:
-        out["model_fit_p"] = f"{ref.model_fit.p_value:.3g}"
-        out["model_fit"] = ref.model_fit.verdict
+    fit = getattr(ref, "model_fit", None)
+    if fit is not None:
+        out["model_fit_p"] = f"{fit.p_value:.3g}"
+        out["model_fit"] = fit.verdict
     if ref is not None and ref.ok:
         out["road_waviness"] = f"{ref.waviness:.3f}"
         for c, noise in zip(channels, ref.noise_std_mps2, strict=False):

@@ -18,7 +18,12 @@ an update is due while the last one still computes. A slow or loaded machine slo
 demo down (the summary says by how much) instead of losing samples.
 
 The updates are written to ``<out>/updates.csv`` as ``rozyn replay`` writes them, and
-drawn in ``<out>/estimates.png`` (:mod:`rozyn_estimator.tools.replay_plot`).
+drawn in ``<out>/estimates.png`` (:mod:`rozyn_estimator.tools.demo_output`).
+
+``--model full`` (or ``--vehicle`` a full car's file) runs the full car: the simulator's
+four corner accelerometers, the estimator on them, roll inertia and lateral CoG besides.
+Both nodes get the vehicle as ``vehicle.*`` parameters (the simulator the file's, the
+estimator the file's with the ``--*-error`` options applied: the half car's only).
 """
 
 from __future__ import annotations
@@ -32,11 +37,11 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rozyn_estimator.errors import BagError
+from rozyn_estimator.errors import BagError, ConfigError
+from rozyn_estimator.tools.demo_output import Seen, print_new, summary, write_outputs
 from rozyn_estimator.tools.options import (
     add_departure_options,
     add_vehicle_error_options,
@@ -49,16 +54,6 @@ NS = 1_000_000_000
 # 2000 Imu messages a second per sensor, and a loaded machine must not make either drop
 # one (the recording then holds exactly what the estimator used).
 QUEUE_DEPTH = 10_000
-
-
-@dataclass
-class _Seen:
-    truth: Any = None
-    inertia: dict[int, Any] = field(default_factory=dict)
-    covariance: dict[int, Any] = field(default_factory=dict)
-    printed: set[int] = field(default_factory=set)
-    lines: list[str] = field(default_factory=list)
-    last_status: str = ""
 
 
 class Pacer:
@@ -119,6 +114,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--real-time-factor", type=float, default=20.0, help="sim seconds per wall second (default: 20)"
     )
     p.add_argument("--window-s", type=float, default=120.0, help="estimator window (default: 120)")
+    p.add_argument("--model", choices=("half", "full"),
+                   help="half car (front and rear accelerometers) or full car (four corners); default: "
+                   "the --vehicle file's, else half")
+    p.add_argument("--vehicle", metavar="FILE.yaml",
+                   help="vehicle file of the simulator and the estimator (default: the model's defaults, "
+                   "config/vehicle.yaml's or config/vehicle_full.yaml's values)")
     p.add_argument(
         "--bag-dir",
         default="bags",
@@ -139,33 +140,50 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_vehicle_error_options(p)
 
 
-def _row(label: str, value: float, std: float, truth: float, digits: int) -> str:
-    err = (value / truth - 1.0) * 100.0
-    return f"{label} = {value:.{digits}f} ± {std:.{digits}f} ({err:+.2f} %)"
-
-
 def node_values(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, Any]]:
     """The estimator's and the simulator's parameter values for the demo's options, checked
     by the nodes' own rules (ConfigError names a bad one) before anything starts."""
     from rozyn_estimator.online import EstimatorConfig
     from rozyn_estimator.parameters import build
     from rozyn_estimator.tools.trial import VEHICLE_ERRORS
-    from rozyn_estimator.vehicle import Vehicle
-    from sim_node.node import NODE_DEFAULTS, SimNodeOptions
+    from sim_node.node import SimNodeOptions, sim_config
 
-    estimator = {"speed_topic": "sim/speed", "window_s": args.window_s, "qos_depth": QUEUE_DEPTH}
-    told = Vehicle()  # the simulated vehicle; the estimator is told it with the *_error options applied
-    for key, error in vehicle_error_values(args).items():
-        estimator |= {f"vehicle.{name}": getattr(told, name) * (1.0 + error)
-                      for name in VEHICLE_ERRORS[key] if error != 0.0}
+    told, vehicle = _vehicle_values(args)  # the estimator is told the vehicle with the *_error options
+    errors = {key: error for key, error in vehicle_error_values(args).items() if error != 0.0}
+    if errors and "vehicle.model" in vehicle:
+        raise ConfigError("the --*-error options change the half car's values; the full car takes none")
+    for key, error in errors.items():
+        told |= {f"vehicle.{name}": told[f"vehicle.{name}"] * (1.0 + error) for name in VEHICLE_ERRORS[key]}
+    estimator = {"speed_topic": "sim/speed", "window_s": args.window_s, "qos_depth": QUEUE_DEPTH, **told}
     sim = {"time_mode": "sim", "real_time_factor": args.real_time_factor, "duration_s": args.duration_s,
            "wait_for_subscribers": True, "road.kind": args.road, "road.amplitudes": args.amplitudes,
-           "speed_kmh": args.speed_kmh, "seed": args.seed, "noise_std_mps2": args.noise_std_mps2}
+           "speed_kmh": args.speed_kmh, "seed": args.seed, "noise_std_mps2": args.noise_std_mps2, **vehicle}
     sim |= {f"departures.{name}": value for name, value in departure_values(args).items()}
     EstimatorConfig.from_parameters(estimator)
     build(SimNodeOptions(), sim)
-    build(NODE_DEFAULTS, sim)
+    sim_config(sim)
     return estimator, sim
+
+
+def _vehicle_values(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The vehicle as both nodes' ``vehicle.*`` parameters (twice: the estimator's to change),
+    from ``--vehicle`` and ``--model``; ConfigError when they disagree."""
+    from rozyn_estimator.parameters import flatten
+    from rozyn_estimator.vehicle import Vehicle
+    from rozyn_estimator.vehicle_full import FullVehicle, load_any_vehicle
+
+    vehicle: Vehicle | FullVehicle = FullVehicle() if args.model == "full" else Vehicle()
+    if args.vehicle:
+        vehicle = load_any_vehicle(args.vehicle)
+        model = "full" if isinstance(vehicle, FullVehicle) else "half"
+        if args.model not in (None, model):
+            needs = "says model: full" if args.model == "full" else "has no model: full"
+            raise ConfigError(f"--vehicle {args.vehicle} is a {model} car's vehicle file; --model "
+                              f"{args.model} needs one that {needs}")
+    values = {f.name: f.value for f in flatten(vehicle)}
+    if isinstance(vehicle, FullVehicle):
+        values["vehicle.model"] = "full"
+    return dict(values), values
 
 
 def run(args: argparse.Namespace) -> int:
@@ -184,6 +202,7 @@ def run(args: argparse.Namespace) -> int:
     from rclpy.signals import SignalHandlerOptions
     from std_msgs.msg import Float64MultiArray
 
+    from rozyn_estimator.online import EstimatorConfig
     from rozyn_estimator.ros import messages as ros_io
     from rozyn_estimator.ros.estimator_node import EstimatorNode
     from rozyn_estimator.ros.recorder_node import BagRecorder, bag_path, drain
@@ -194,7 +213,7 @@ def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     previous = _catch_signals(stop)
     executor = EventsExecutor(context=ctx)
-    seen = _Seen()
+    seen = Seen(EstimatorConfig.from_parameters(estimator_values).layout)
     probe = rclpy.create_node("demo_probe", context=ctx)
     latched = QoSProfile(
         depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
@@ -242,14 +261,16 @@ def run(args: argparse.Namespace) -> int:
         context=ctx,
         parameter_overrides=[Parameter(k, value=v) for k, v in sim_values.items()],
     )
-    pacer = Pacer(sim, est, [] if recorder is None else
-                  [functools.partial(recorder.received, t) for t in ("/accel/front", "/accel/rear")])
+    accel = [f"/{topic}" for _, topic in est.config.sensors]
+    intakes = [] if recorder is None else [functools.partial(recorder.received, t) for t in accel]
+    pacer = Pacer(sim, est, intakes)
     sim.gate = pacer
     nodes = [n for n in (probe, est, recorder) if n is not None]
     for node in nodes:
         executor.add_node(node)
     print(
-        f"rozyn demo: {args.road} road ({args.amplitudes} amplitudes), {args.speed_kmh:g} km/h, "
+        f"rozyn demo: {'the full car, ' if seen.layout.full else ''}{args.road} road ({args.amplitudes} "
+        f"amplitudes), {args.speed_kmh:g} km/h, "
         f"{args.duration_s:g} s of sim time at {args.real_time_factor:g}x, window {args.window_s:g} s "
         f"(ROS_DOMAIN_ID {domain})",
         flush=True,
@@ -257,12 +278,12 @@ def run(args: argparse.Namespace) -> int:
     started = time.monotonic()
     try:
         if recorder is not None:
-            _wait_for_recorder(executor, recorder, sim, stop)
+            _wait_for_recorder(executor, recorder, sim, stop, accel)
         executor.add_node(sim)
         nodes.append(sim)
         while not sim.finished and not stop.is_set():
             executor.spin_once(timeout_sec=0.05)
-            _print_new(seen)
+            print_new(seen)
         end = time.monotonic() + 120.0  # updates still computing or on their way: let them come
         while (
             time.monotonic() < end
@@ -270,7 +291,7 @@ def run(args: argparse.Namespace) -> int:
             and (est.pending_updates or len(set(seen.inertia) & set(seen.covariance)) < est.updates_published)
         ):
             executor.spin_once(timeout_sec=0.05)
-            _print_new(seen)
+            print_new(seen)
         if stop.is_set():
             print("interrupted", file=sys.stderr)
     except KeyboardInterrupt:
@@ -285,8 +306,8 @@ def run(args: argparse.Namespace) -> int:
         executor.shutdown()
         rclpy.try_shutdown(context=ctx)
         _restore_signals(previous)
-    code = _summary(seen, args, wall, pacer)
-    _write_outputs(Path(args.out) if args.out else Path("out", "demo", bag.name), updates, seen, args)
+    code = summary(seen, args, wall, pacer.held_s, pacer.max_pending)
+    write_outputs(Path(args.out) if args.out else Path("out", "demo", bag.name), updates, seen, args)
     if recorder is not None:
         total = sum(recorder.writer.writer.counts.values())
         print(
@@ -306,12 +327,13 @@ def _rozyn_command() -> str:
 
 
 def _wait_for_recorder(
-    executor: Any, recorder: Any, sim: Any, stop: threading.Event, timeout_s: float = 20.0
+    executor: Any, recorder: Any, sim: Any, stop: threading.Event, accel: Sequence[str],
+    timeout_s: float = 20.0,
 ) -> None:
-    """Spin (the sim not yet) until the recorder is subscribed to the sim's topics and
-    matched with its publishers, and holds the estimator's configuration: the bag then
-    holds every message the estimator gets."""
-    inputs = ("/accel/front", "/accel/rear", "/sim/speed")
+    """Spin (the sim not yet) until the recorder is subscribed to the sim's topics (``accel``:
+    the accelerometers') and matched with its publishers, and holds the estimator's
+    configuration: the bag then holds every message the estimator gets."""
+    inputs = (*accel, "/sim/speed")
     wanted = {*inputs, "/sim/ground_truth", "/clock"}
     publishers = {p.topic_name: p for p in sim.publishers}
 
@@ -343,67 +365,6 @@ def _catch_signals(stop: threading.Event) -> dict[int, Any]:
 def _restore_signals(previous: dict[int, Any]) -> None:
     for sig, handler in previous.items():
         signal.signal(sig, handler)
-
-
-def _print_new(seen: _Seen) -> None:
-    if seen.truth is None:
-        return
-    t = seen.truth.inertia
-    truth = (t.m, t.iyy, -t.com.x)
-    for stamp in sorted(set(seen.inertia) & set(seen.covariance) - seen.printed):
-        msg, cov = seen.inertia[stamp], seen.covariance[stamp]
-        std = [max(cov.data[i * 4], 0.0) ** 0.5 for i in range(3)]
-        line = "  ".join(
-            [
-                f"t = {stamp / NS:6.1f} s",
-                _row("m", msg.inertia.m, std[0], truth[0], 1) + " kg",
-                _row("Iyy", msg.inertia.iyy, std[1], truth[1], 1) + " kg m²",
-                _row("lf", -msg.inertia.com.x, std[2], truth[2], 4) + " m",
-            ]
-        )
-        seen.printed.add(stamp)
-        seen.lines.append(line)
-        print(line, flush=True)
-
-
-def _summary(seen: _Seen, args: argparse.Namespace, wall_s: float, pacer: Pacer) -> int:
-    print()
-    if seen.truth is not None:
-        t = seen.truth.inertia
-        print(f"truth: m = {t.m:g} kg, Iyy = {t.iyy:g} kg m², lf = {-t.com.x:g} m")
-    print(f"the simulator waited {pacer.held_s:.1f} s for the estimator and the recorder "
-          f"(at most {pacer.max_pending} updates waiting)")
-    if not seen.printed:
-        print(f"no estimate was published ({seen.last_status or 'no diagnostics'})")
-        return 1
-    last = seen.lines[-1]
-    print(f"{len(seen.printed)} estimates in {wall_s:.1f} s wall time "
-          f"({args.duration_s / wall_s:.1f}x real time); last: {last}")
-    return 0
-
-
-def _write_outputs(out_dir: Path, updates: Sequence[Any], seen: _Seen, args: argparse.Namespace) -> None:
-    """``updates.csv`` as ``rozyn replay`` writes it, and ``estimates.png``; prints their paths."""
-    import csv
-
-    from rozyn_estimator.tools.replay_outputs import CSV_COLUMNS, ReplayedUpdate, csv_row
-    from rozyn_estimator.tools.replay_plot import PLOT_NAME, matplotlib_available, plot_estimates
-
-    out_dir.mkdir(parents=True, exist_ok=True)
-    with (out_dir / "updates.csv").open("w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(CSV_COLUMNS)
-        for update in sorted(updates, key=lambda u: u.stamp_ns):
-            writer.writerow(csv_row(ReplayedUpdate(update, update.stamp_ns)))
-    print(f"\nwrote {out_dir / 'updates.csv'}")
-    if args.plot is False or not updates or (args.plot is None and not matplotlib_available()):
-        return
-    t = seen.truth.inertia if seen.truth is not None else None
-    png = plot_estimates(
-        out_dir / "updates.csv", out_dir / PLOT_NAME, truth=None if t is None else (t.m, t.iyy, -t.com.x),
-        title=f"rozyn demo: {args.road} road ({args.amplitudes}), {args.speed_kmh:g} km/h",
-    )
-    print(f"plot: {png}")
 
 
 HELP = "the main job: sim and estimator nodes on sim time, estimate vs truth"

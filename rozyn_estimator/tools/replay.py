@@ -31,6 +31,7 @@ from rozyn_estimator.online import SPEED_TOPIC_TYPES
 from rozyn_estimator.tools.replay_feed import ReplayOptions, replay, replay_bag
 from rozyn_estimator.tools.replay_outputs import utc
 from rozyn_estimator.tools.replay_report import format_summary
+from rozyn_estimator.vehicle_full import CORNERS
 
 __all__ = ["DESCRIPTION", "HELP", "add_arguments", "replay", "run"]
 
@@ -59,6 +60,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     src = p.add_argument_group("input (default: the configuration recorded in the bag, else the node's)")
     src.add_argument("--front-topic", metavar="T", help="front accelerometer topic")
     src.add_argument("--rear-topic", metavar="T", help="rear accelerometer topic")
+    for corner in CORNERS:  # the full car's
+        src.add_argument(f"--{corner.replace('_', '-')}-topic", metavar="T",
+                         help=f"full car: {corner.replace('_', ' ')} accelerometer topic ('' for none)")
     src.add_argument(
         "--field", metavar="F", help="numeric field of their messages, e.g. linear_acceleration.z"
     )
@@ -69,7 +73,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     est.add_argument("--update-period-s", type=float, help="message time between updates [s]")
     est.add_argument("--min-window-fill", type=float, help="share of the window needed to estimate")
     est.add_argument("--speed-mps", type=float, help="known speed without a speed topic [m/s]")
-    est.add_argument("--vehicle", metavar="FILE.yaml", help="vehicle parameters")
+    est.add_argument("--vehicle", metavar="FILE.yaml",
+                     help="vehicle parameters (a full car's file, model: full, replays the corner topics)")
     est.add_argument("--method", help="pipeline preset of rozyn trial --method (e.g. rozyn, likelihood)")
     est.add_argument(
         "--ignore-bag-config",
