@@ -160,3 +160,22 @@ def test_the_budgets_shortcut_keeps_the_contributions(monkeypatch):
     assert quick is not None and full is not None and quick.contributions.keys() == full.contributions.keys()
     a, b = np.array(list(quick.contributions.values())), np.array(list(full.contributions.values()))
     assert np.all(np.abs(a - b) <= 0.03 * np.abs(b).max(axis=0)), np.abs(a - b) / np.abs(b).max(axis=0)
+
+
+def test_the_half_cars_model_check_warns_when_its_sensors_see_the_roll():
+    """Issue 13 deliverable 3: the half car on a full car. Its centreline (each axle's two
+    sensors averaged) fits; two sensors on the left side see the roll mode, and the half
+    car's model check says so and names the full-vehicle model."""
+    from rozyn_estimator.method import estimate
+    from rozyn_estimator.vehicle_full import centreline_half_car
+
+    y = _run(FullVehicle(), seed=1)
+    half = centreline_half_car(FullVehicle())
+    centre = estimate(np.column_stack([y[:, :2].mean(axis=1), y[:, 2:].mean(axis=1)]), 100.0, half,
+                      PipelineConfig(), SPEED_MPS)
+    left = estimate(y[:, [0, 2]], 100.0, half, PipelineConfig(), SPEED_MPS)
+    assert centre.refinement is not None and left.refinement is not None
+    assert centre.refinement.model_fit is not None and left.refinement.model_fit is not None
+    assert centre.refinement.model_fit.verdict == "fits"
+    assert "use the full-vehicle model" in left.refinement.model_fit.verdict
+    assert any("use the full-vehicle model" in note for note in left.notes)
