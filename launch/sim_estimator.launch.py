@@ -2,15 +2,16 @@
 
     ros2 launch rozyn_estimator sim_estimator.launch.py [road:=laplace] [class:=B]
         [amplitudes:=fixed] [speed_kmh:=50] [duration_s:=300] [vehicle_file:=my_car.yaml]
-        [record:=true] [bag_dir:=bags] [real_time_factor:=5]
+        [model:=full] [record:=true] [bag_dir:=bags] [real_time_factor:=5]
 
 The simulator (``config/sim.yaml``, on sim time at ``real_time_factor`` times real time,
 starting once its accelerometer topics are subscribed) drives a half car over the chosen
-road; the estimator (``config/estimator.yaml``) uses the same vehicle file and the sim's
-speed. Unlike ``rozyn demo`` (one process, paced by what the estimator takes in), these
-are separate processes without flow control: the default 5x leaves the estimator time
-for every update on two cores (at 20x here it skipped updates and lost 14 % of the
-samples to a saturated CPU).
+road (``model:=full``: the full car of ``config/vehicle_full.yaml``, or of any vehicle file
+that says ``model: full``, with four corner accelerometers); the estimator
+(``config/estimator.yaml``) uses the same vehicle file and the sim's speed. Unlike ``rozyn
+demo`` (one process, paced by what the estimator takes in), these are separate processes
+without flow control: the default 5x leaves the estimator time for every update on two
+cores (at 20x here it skipped updates and lost 14 % of the samples to a saturated CPU).
 With ``duration_s`` > 0 everything stops when the sim is done; otherwise Ctrl-C stops
 it (every node exits with status 0; the recorder closes its bag).
 """
@@ -20,7 +21,7 @@ from launch.conditions import IfCondition
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch.launch_description import LaunchDescription
-from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch.substitutions import LaunchConfiguration, PathJoinSubstitution, PythonExpression
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 from launch_ros.substitutions import FindPackageShare
@@ -31,6 +32,7 @@ PACKAGE = "rozyn_estimator"
 def generate_launch_description() -> LaunchDescription:
     config = PathJoinSubstitution([FindPackageShare(PACKAGE), "config"])
     arg = LaunchConfiguration
+    by_model = PythonExpression(["'vehicle_full.yaml' if '", arg("model"), "' == 'full' else 'vehicle.yaml'"])
     arguments = [
         DeclareLaunchArgument("road", default_value="iso", choices=["iso", "laplace", "flat"],
                               description="road model: ISO 8608, Laplace (Bogsjo) or flat"),
@@ -45,14 +47,19 @@ def generate_launch_description() -> LaunchDescription:
                               description="sim seconds per wall second (0: as fast as possible); faster "
                               "than the estimator's updates and it skips some, faster than 3 processes "
                               "on the cores can carry and samples are lost"),
-        DeclareLaunchArgument("vehicle_file", default_value=PathJoinSubstitution([config, "vehicle.yaml"]),
-                              description="vehicle YAML, for the sim (the truth) and the estimator"),
+        DeclareLaunchArgument("model", default_value="half", choices=["half", "full"],
+                              description="half car (front and rear accelerometers) or full car (four "
+                              "corners); a vehicle_file saying model: full is a full car anyway"),
+        DeclareLaunchArgument("vehicle_file", default_value=PathJoinSubstitution([config, by_model]),
+                              description="vehicle YAML, for the sim (the truth) and the estimator (default: "
+                              "config/vehicle.yaml, with model:=full config/vehicle_full.yaml)"),
         DeclareLaunchArgument("record", default_value="false", choices=["true", "false"],
                               description="record everything with bag_recorder"),
         DeclareLaunchArgument("bag_dir", default_value="bags",
                               description="where the recorder writes sim-<UTC time>/"),
     ]
     vehicle = ParameterValue(arg("vehicle_file"), value_type=str)
+    model = ParameterValue(arg("model"), value_type=str)
     sim = Node(
         package=PACKAGE, executable="sim_node", name="sim_node", output="screen",
         parameters=[
@@ -65,6 +72,7 @@ def generate_launch_description() -> LaunchDescription:
                 "duration_s": ParameterValue(arg("duration_s"), value_type=float),
                 "real_time_factor": ParameterValue(arg("real_time_factor"), value_type=float),
                 "vehicle_file": vehicle,
+                "vehicle.model": model,
             },
         ],
     )
@@ -72,7 +80,8 @@ def generate_launch_description() -> LaunchDescription:
         package=PACKAGE, executable="estimator_node", name="estimator_node", output="screen",
         parameters=[
             PathJoinSubstitution([config, "estimator.yaml"]),
-            {"use_sim_time": True, "speed_topic": "sim/speed", "vehicle_file": vehicle, "qos_depth": 10000},
+            {"use_sim_time": True, "speed_topic": "sim/speed", "vehicle_file": vehicle,
+             "vehicle.model": model, "qos_depth": 10000},
         ],
     )
     recorder = Node(

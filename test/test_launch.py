@@ -5,7 +5,8 @@ against the package and the nodes.
 - every ``Node`` runs an executable of this package, under the node's own name;
 - its parameter files exist in ``config/`` (installed with the launch files), and every
   parameter it sets is one the node declares;
-- with the arguments' defaults, the parameters are valid for the node (its own checks);
+- with the arguments' defaults (and with ``model:=full``), the parameters are valid for the
+  node (its own checks);
 - an argument with choices offers exactly the node parameter's choices;
 - every argument is used, every ``LaunchConfiguration`` is declared;
 - remapped topics are topics the node uses.
@@ -30,8 +31,7 @@ from rozyn_estimator.ros.estimator_node import COVARIANCE_TOPIC, INERTIA_TOPIC, 
 from rozyn_estimator.ros.recorder_node import RecorderOptions
 from rozyn_estimator.tools.node_scripts import NODES
 from rozyn_estimator.tools.param_tables import node_parameters
-from rozyn_estimator.vehicle import config_from_parameters
-from sim_node.node import NODE_DEFAULTS, SimNodeOptions
+from sim_node.node import SimNodeOptions, sim_config
 
 ROOT = Path(__file__).resolve().parents[1]
 LAUNCH_FILES = sorted((ROOT / "launch").glob("*.launch.py"))
@@ -84,10 +84,12 @@ def _walk(x: Any):
 
 
 class Evaluator:
-    """Substitutions evaluated with the arguments' defaults, the package share = the repo."""
+    """Substitutions evaluated with the arguments' defaults (or ``given`` values), the package
+    share = the repo."""
 
-    def __init__(self, actions: list[Recorded]) -> None:
+    def __init__(self, actions: list[Recorded], given: dict[str, str] | None = None) -> None:
         self.arguments = {a.args[0]: a for a in actions if _kind(a) == "DeclareLaunchArgument"}
+        self.given = given or {}
 
     def __call__(self, x: Any) -> Any:
         kind = _kind(x)
@@ -101,7 +103,11 @@ class Evaluator:
         if kind == "PathJoinSubstitution":
             return str(Path(*(str(self(y)) for y in x.args[0])))
         if kind == "LaunchConfiguration":
-            return self(self.arguments[x.args[0]].kwargs["default_value"])
+            name = x.args[0]
+            default = self.arguments[name].kwargs["default_value"]
+            return self.given[name] if name in self.given else self(default)
+        if kind == "PythonExpression":
+            return str(eval(self(x.args[0])))  # as launch evaluates it
         if kind == "ParameterValue":
             value, value_type = self(x.args[0]), x.kwargs.get("value_type")
             if value_type is bool:
@@ -125,16 +131,16 @@ def _file_parameters(path: Path, node: str) -> dict[str, Any]:
     return values
 
 
-def _check_values(executable: str, values: dict[str, Any]) -> None:
-    """The node's own checks (ConfigError names the parameter)."""
+def _check_values(executable: str, values: dict[str, Any]) -> str | None:
+    """The node's own checks (ConfigError names the parameter); the vehicle model it runs."""
     if executable == "estimator_node":
         build(NodeOptions(), values)
-        EstimatorConfig.from_parameters(values)
-    elif executable == "sim_node":
+        return EstimatorConfig.from_parameters(values).model
+    if executable == "sim_node":
         build(SimNodeOptions(), values)
-        config_from_parameters(NODE_DEFAULTS, values)
-    else:
-        build(RecorderOptions(), values)
+        return sim_config(values).model
+    build(RecorderOptions(), values)
+    return None
 
 
 def _declared(executable: str) -> dict[str, Any]:
@@ -157,10 +163,14 @@ def test_launch_files_are_there_and_installed():
     assert '"launch/*.launch.py"' in (ROOT / "setup.py").read_text()  # setup.py data_files
 
 
+@pytest.mark.parametrize("model", ["default", "full"])
 @pytest.mark.parametrize("path", LAUNCH_FILES, ids=lambda p: p.name)
-def test_launch_file_matches_the_nodes(path, monkeypatch):
+def test_launch_file_matches_the_nodes(path, model, monkeypatch):
     actions = _describe(path, monkeypatch)
     evaluate = Evaluator(actions)
+    if model == "full":  # model:=full, or (the estimator alone) the full car's vehicle file
+        given = {"vehicle_file": str(ROOT / "config" / "vehicle_full.yaml")}
+        evaluate = Evaluator(actions, {"model": "full"} if "model" in evaluate.arguments else given)
     nodes = [a for a in actions if _kind(a) == "Node"]
     assert nodes
     used = {x.args[0] for x in _walk(actions) if _kind(x) == "LaunchConfiguration"}
@@ -185,6 +195,6 @@ def test_launch_file_matches_the_nodes(path, monkeypatch):
                 assert file.parent == ROOT / "config" and file.is_file(), file
                 values |= _file_parameters(file, exe)
         assert set(values) <= set(declared) | {"use_sim_time"}, set(values) - set(declared)
-        _check_values(exe, values)
+        assert _check_values(exe, values) in (None, "half" if model == "default" else "full")
         remapped = {source for source, _ in kw.get("remappings", [])}
         assert remapped <= _node_topics(exe), remapped - _node_topics(exe)
