@@ -8,10 +8,14 @@ parameters; the road's intensity, waviness and shape; the tracks' coherence scal
 floor per sensor) by scipy's trust-region method with the analytic gradient and the Fisher
 information as its Hessian (scoring), until the Newton decrement is below ``tol``.
 
-Starts: the previous window's optimum when there is one (warm), else Rozyn's estimate;
-when that gives no finite likelihood, or explains a channel as mostly noise (a wrong
-basin), the best point of a coarse grid of heave, pitch and roll frequencies as well. The
-lower ℓ wins; a result that still explains a channel as mostly noise is refused.
+Starts: the previous window's optimum when there is one (warm), else Rozyn's estimate,
+for at most 25 iterations; when that gives no finite likelihood, explains a channel as
+mostly noise (a wrong basin), has not converged, or moved more than 25 % from its start
+(Rozyn's estimate of the full car can be far off: at 50 km/h a seed's roll inertia came out
+at a third, and scoring from there crawled for 100 iterations to ℓ 3000 above the optimum),
+the best point of a coarse grid of heave, pitch and roll frequencies as well. The lower ℓ
+wins (continued if it has not converged); a result that still explains a channel as
+mostly noise is refused.
 
 Covariance: the inverse Fisher information, mapped to the physical parameters, times the
 taper's variance factor ``mean(w⁴) / mean(w²)²`` (Dahlhaus 1988: a tapered periodogram's
@@ -45,6 +49,8 @@ from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
 
 _MIN_NOISE = 1e-9  # the model's fixed white floor, share of each channel's band power
 _GROUP_HZ = 0.02  # the periodogram's means span at most this (module docstring)
+_FIRST_ITERATIONS = 25  # the first start's share of max_iter when a second may follow (noisy data: 3-15)
+_CLOSE = 0.25  # a result further than this share from its start calls for the grid's start too
 _BUDGET_MOVE = 0.01  # a warm update keeps the budget while ln m, ln I, logit l_f, y_c [m] move less
 _GRID_HZ = {"heave": (0.8, 1.2, 1.8), "pitch": (0.8, 1.2, 1.8), "roll": (1.0, 1.6, 2.5)}
 
@@ -143,19 +149,35 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     best: OptimizeResult | None = None
     iterations = starts = 0
 
-    def run(theta0: np.ndarray) -> None:
+    def run(theta0: np.ndarray, max_iter: int) -> None:
         nonlocal best, iterations, starts
-        res = _minimize(objective, theta0, cfg)
+        res = _minimize(objective, theta0, cfg, max_iter)
         iterations, starts = iterations + int(res.nit), starts + 1
         if np.isfinite(res.fun) and (best is None or res.fun < best.fun):
             best = res
 
+    def doubtful() -> bool:
+        """No result, or one that explains a channel as noise, did not converge in the first
+        start's iterations, or moved from the start by more than a quarter (a poor start:
+        a better basin may lie elsewhere)."""
+        if best is None:
+            return True
+        moved = np.abs(model.physical(best.x)[:3] / first_params[:3] - 1.0).max() > _CLOSE
+        return bool(moved or objective.decrement(best.x) >= cfg.tol
+                    or _noise_share(best.x, model, power).max() > cfg.max_noise_share)
+
+    first_iter = min(_FIRST_ITERATIONS, cfg.max_iter) if cfg.second_start else cfg.max_iter
+    first_params = np.full(5, np.nan)
     if warm is not None and warm.theta is not None and warm.theta.size == model.n_params:
-        run(warm.theta)
+        first_params = model.physical(warm.theta)
+        run(warm.theta, first_iter)
     elif start is not None and _physical(start, vehicle.wheelbase_m):
-        run(_start_theta(model, objective, power, np.asarray(start, dtype=float), cfg.noise_start))
-    if cfg.second_start and (best is None or _noise_share(best.x, model, power).max() > cfg.max_noise_share):
-        run(_grid_start(model, objective, power, vehicle, cfg.noise_start))
+        first_params = np.asarray(start, dtype=float)
+        run(_start_theta(model, objective, power, first_params, cfg.noise_start), first_iter)
+    if cfg.second_start and doubtful():
+        run(_grid_start(model, objective, power, vehicle, cfg.noise_start), cfg.max_iter)
+    if best is not None and objective.decrement(best.x) >= cfg.tol and iterations < cfg.max_iter:
+        run(best.x, cfg.max_iter - iterations)  # the better start's fit, continued
     if best is None or not np.isfinite(best.fun):
         raise _FitError("likelihood fit: no start gave a finite likelihood")
     theta = best.x
@@ -217,7 +239,8 @@ def _grouped(freq_hz: np.ndarray, periodogram: np.ndarray, step: int) -> tuple[n
             np.add.reduceat(periodogram, starts, axis=0) / counts[:, None, None], counts)
 
 
-def _minimize(objective: FullWhittle, theta0: np.ndarray, cfg: LikelihoodConfig) -> OptimizeResult:
+def _minimize(objective: FullWhittle, theta0: np.ndarray, cfg: LikelihoodConfig,
+              max_iter: int) -> OptimizeResult:
     """Scoring by scipy's trust-region method until the Newton decrement is below ``tol``."""
     def stop_when_converged(intermediate_result: OptimizeResult) -> None:
         if objective.decrement(intermediate_result.x) < cfg.tol:
@@ -228,7 +251,7 @@ def _minimize(objective: FullWhittle, theta0: np.ndarray, cfg: LikelihoodConfig)
     if objective.decrement(theta0) < cfg.tol:
         return OptimizeResult(x=theta0, fun=objective.fun(theta0), nit=0)
     return minimize(objective.fun, theta0, jac=objective.jac, hess=objective.hess, method="trust-exact",
-                    callback=stop_when_converged, options={"gtol": 1e-12, "maxiter": cfg.max_iter})
+                    callback=stop_when_converged, options={"gtol": 1e-12, "maxiter": max_iter})
 
 
 def _noise_share(theta: np.ndarray, model: FullCarSpectrum, power: np.ndarray) -> np.ndarray:
