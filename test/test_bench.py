@@ -10,7 +10,8 @@ KEYS = ("sim_100s_at_100hz_ms", "road_generation_ms", "update_120s_window_ms",
         "refined_update_warm_without_budget_ms", "glitch_update_warm_ms", "trial_100s_iso_ms",
         "study_trials_per_second", "study_refined_trials_per_second", "refined_warm_per_rozyn_update",
         "refined_cold_per_rozyn_update", "budget_overhead_pct",
-        "glitch_per_clean_update", "peak_rss_mb", "goals")
+        "glitch_per_clean_update", "full_refined_update_cold_ms", "full_refined_update_warm_ms",
+        "full_refined_warm_per_half", "full_refined_cold_per_half", "peak_rss_mb", "goals")
 
 
 def test_bench_reports_the_refined_studys_rate_next_to_the_others(monkeypatch):
@@ -26,3 +27,5 @@ def test_bench_reports_the_refined_studys_rate_next_to_the_others(monkeypatch):
     assert tuple(out) == KEYS
     assert out["study_trials_per_second"] == 100.0 and out["study_refined_trials_per_second"] == 10.0
     assert studies == [(2, "", "fixed", 0.0), (1, "likelihood", "gaussian", 0.1)]  # the refined grid's roads
+    # the full car's refined update per the half car's (issue 13: <= 3x), from the same run
+    assert out["full_refined_warm_per_half"] == 1.0 and out["goals"]["full_refined_warm_per_half"] == 3.0
