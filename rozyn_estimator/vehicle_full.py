@@ -322,7 +322,8 @@ def load_full_vehicle(path: str | Path) -> FullVehicle:
     """
     vehicle = load_any_vehicle(path)
     if not isinstance(vehicle, FullVehicle):
-        raise ConfigError(f"{one_line(str(path))}: a half-car vehicle file; a full car's says model: full")
+        raise ConfigError(f"{one_line(str(path))}: a half-car vehicle file; a full car's says model: full "
+                          "(see config/vehicle_full.yaml)")
     return vehicle
 
 

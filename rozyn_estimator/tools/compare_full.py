@@ -26,7 +26,7 @@ from rozyn_estimator.method import METHODS
 from rozyn_estimator.method.full import FULL_PARAM_NAMES, FullEstimate, estimate_full
 from rozyn_estimator.tools.trial import parallel_map, parse_seeds
 from rozyn_estimator.tools.trial_full import METHODS_FULL, FullTrialSpec, simulate_full
-from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle, load_any_vehicle
+from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle, load_full_vehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig
 
@@ -199,13 +199,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"suite: --model full has the acceptance suite; got {args.suite!r}")
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     methods = [m for m in methods if m in METHODS_FULL] if args.methods_defaulted else methods
-    vehicle = FULL_PRESETS[args.vehicle_preset]
-    if args.vehicle:
-        loaded = load_any_vehicle(args.vehicle)
-        if not isinstance(loaded, FullVehicle):
-            raise ConfigError(f"{args.vehicle}: a half-car vehicle file; --model full needs a full-car file "
-                              "(model: full, see config/vehicle_full.yaml)")
-        vehicle = loaded
+    vehicle = load_full_vehicle(args.vehicle) if args.vehicle else FULL_PRESETS[args.vehicle_preset]
     if args.suite == "acceptance":
         cases = acceptance_cases(vehicle)
     else:

@@ -23,7 +23,7 @@ from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS
 from rozyn_estimator.method.full import FULL_PARAM_NAMES, FullEstimate, estimate_full
 from rozyn_estimator.tools.trial import parallel_map, parse_seeds
-from rozyn_estimator.vehicle_full import FullVehicle, load_any_vehicle
+from rozyn_estimator.vehicle_full import FullVehicle, load_full_vehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation
 
@@ -73,13 +73,7 @@ def spec_from_args(args: argparse.Namespace) -> FullTrialSpec:
     """The full-car trial the ``rozyn trial`` options describe (refusing what it cannot do)."""
     if args.method not in METHODS_FULL:
         raise ConfigError(f"method: the full car has {', '.join(METHODS_FULL)}; got {args.method!r}")
-    vehicle = FullVehicle()
-    if args.vehicle:
-        loaded = load_any_vehicle(args.vehicle)
-        if not isinstance(loaded, FullVehicle):
-            raise ConfigError(f"{args.vehicle}: a half-car vehicle file; --model full needs a full-car file "
-                              "(model: full, see config/vehicle_full.yaml)")
-        vehicle = loaded
+    vehicle = load_full_vehicle(args.vehicle) if args.vehicle else FullVehicle()
     if args.road == "free-decay":
         raise ConfigError("road: --model full drives over ISO 8608 or Laplace roads (free decay: the tests)")
     road = RoadSpec(kind=args.road, road_class=args.road_class, amplitudes=args.amplitudes,

@@ -18,22 +18,16 @@ without the aliasing terms, though they carry a few per mille of the power: 9 %)
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Callable
 
 import numpy as np
 
+from rozyn_estimator.method.full.budget import ABS_STEP, AXLE, VehicleMove, moved_copy, vehicle_moves
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.full.whittle import FullWhittle
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
 
-_REL_STEP = 1e-5  # share of a value
-_ABS_STEP = 1e-6  # m, s or share of a gain
 _STEP = 4  # the sums over every 4th of the fit's frequencies (module docstring)
-_QUADS = {"suspension_stiffness": "suspension_stiffness_npm", "suspension_damping": "suspension_damping_nspm",
-          "tyre_stiffness": "tyre_stiffness_npm", "tyre_damping": "tyre_damping_nspm",
-          "unsprung_mass": "unsprung_mass_kg"}
-_AXLE = {"front": (0, 1), "rear": (2, 3)}
 
 # a move: the step -> (the vehicle moved, a factor per channel (F, k) or None)
 Move = Callable[[float], tuple[FullVehicle, np.ndarray | None]]
@@ -68,26 +62,17 @@ def refinement_contributions(objective: FullWhittle, theta: np.ndarray, theta_co
 
 
 def _moves(v: FullVehicle, model: FullCarSpectrum, key: str) -> list[tuple[str, float, Move]]:
-    """(contribution name, step, the move) of one tolerance key."""
-    def vehicle(**changes: object) -> tuple[FullVehicle, np.ndarray | None]:
-        # a copy with the value moved a tiny step, without FullVehicle's validation (a few ms a
-        # time, the budget's largest cost otherwise): the step cannot leave the valid range
-        out = copy.copy(v)
-        for name, value in changes.items():
-            object.__setattr__(out, name, value)
-        return out, None
+    """(contribution name, step, the move) of one tolerance key: the vehicle's values as in
+    Rozyn's stage's budget; each sensor's offset and gain on its own, the rear sensors' timing
+    as a factor on their channels."""
+    def unsensed(move: VehicleMove) -> Move:
+        return lambda h: (move(h), None)
 
-    def scaled(quad: str, corners: tuple[int, ...], h: float) -> tuple[FullVehicle, np.ndarray | None]:
-        values = list(getattr(v, quad))
-        for c in corners:
-            values[c] *= 1.0 + h
-        return vehicle(**{quad: tuple(values)})
-
-    def moved(field: str, corner: int) -> Move:
+    def shifted(corner: int) -> Move:
         def move(h: float) -> tuple[FullVehicle, np.ndarray | None]:
-            values = list(getattr(v, field))
-            values[corner] += h
-            return vehicle(**{field: tuple(values)})
+            xs = list(v.sensor_x_m)
+            xs[corner] += h
+            return moved_copy(v, sensor_x_m=tuple(xs)), None
         return move
 
     def channel(columns: list[int], factor: Callable[[float], np.ndarray]) -> Move:
@@ -98,25 +83,17 @@ def _moves(v: FullVehicle, model: FullCarSpectrum, key: str) -> list[tuple[str, 
         return move
 
     sensors = model.sensors
-    axle = "front" if "_front" in key else "rear"
-    quad = next((q for k, q in _QUADS.items() if key.startswith(k)), None)
-    if quad is not None:
-        return [(key, _REL_STEP, lambda h: scaled(quad, _AXLE[axle], h))]
-    if key.startswith("anti_roll"):
-        bar = getattr(v, key)
-        return [] if bar == 0 else [(key, _REL_STEP, lambda h: vehicle(**{key: bar * (1 + h)}))]
-    if key in ("wheelbase_m", "track_front_m", "track_rear_m"):
-        return [(key, _ABS_STEP, lambda h: vehicle(**{key: getattr(v, key) + h}))]
+    alike = vehicle_moves(v, key, sensors)
+    if alike is not None:
+        return [(name, step, unsensed(move)) for name, step, move in alike]
+    axle = AXLE["front" if "_front" in key else "rear"]
     if key in ("sensor_front_offset_m", "sensor_rear_offset_m"):
-        return [(f"{key}[{CORNERS[c]}]", _ABS_STEP, moved("sensor_x_m", c))
-                for c in sensors if c in _AXLE[axle]]
-    if key == "sensor_lateral_m":
-        return [(f"{key}[{CORNERS[c]}]", _ABS_STEP, moved("sensor_y_m", c)) for c in sensors]
+        return [(f"{key}[{CORNERS[c]}]", ABS_STEP, shifted(c)) for c in sensors if c in axle]
     if key.startswith("sensor_gain"):
-        return [(f"{key}[{CORNERS[c]}]", _ABS_STEP,
+        return [(f"{key}[{CORNERS[c]}]", ABS_STEP,
                  channel([j], lambda h: np.full(model.omega.size, 1.0 + h, dtype=complex)))
-                for j, c in enumerate(sensors) if c in _AXLE[axle]]
+                for j, c in enumerate(sensors) if c in axle]
     if key == "sensor_time_offset_s":
-        rear = [j for j, c in enumerate(sensors) if c in _AXLE["rear"]]
-        return [(key, _ABS_STEP, channel(rear, lambda h: np.exp(-1j * model.omega * h)))]
+        rear = [j for j, c in enumerate(sensors) if c in AXLE["rear"]]
+        return [(key, ABS_STEP, channel(rear, lambda h: np.exp(-1j * model.omega * h)))]
     return []
