@@ -248,7 +248,8 @@ def parse_seeds(text: str) -> list[int]:
 
 @dataclass(frozen=True)
 class Summary:
-    """Statistics of a set of trials, per parameter in PARAM_NAMES order."""
+    """Statistics of a set of trials, per parameter in PARAM_NAMES order (a full car's rows in
+    ``rozyn study --model full``: FULL_PARAM_NAMES)."""
 
     n: int
     failures: int
@@ -268,23 +269,24 @@ def summarise(results: Iterable[TrialResult]) -> Summary:
     results = list(results)
     ok = [r for r in results if r.estimate.ok]
     truth = results[0].truth if results else np.full(3, np.nan)
+    k = len(truth)  # the parameters: three, or a full car's five (rozyn study --model full)
     if not ok:
-        nan = np.full(3, np.nan)
+        nan = np.full(k, np.nan)
         return Summary(len(results), len(results), truth, nan, nan, nan, nan, nan, float("nan"))
     p = np.array([r.estimate.params for r in ok])
-    stds = np.array([r.estimate.std if r.estimate.std is not None else np.full(3, np.nan) for r in ok])
+    stds = np.array([r.estimate.std if r.estimate.std is not None else np.full(k, np.nan) for r in ok])
     return Summary(
         n=len(results),
         failures=len(results) - len(ok),
         truth=truth,
         mean=p.mean(axis=0),
-        std=p.std(axis=0, ddof=1) if len(ok) > 1 else np.zeros(3),
+        std=p.std(axis=0, ddof=1) if len(ok) > 1 else np.zeros(k),
         bias_pct=(p.mean(axis=0) / truth - 1.0) * 100.0,
         within_6pct=np.mean(np.abs(p / truth - 1.0) <= 0.06, axis=0),
         mean_reported_std=np.sqrt(np.mean(stds**2, axis=0)),
         median_ms=float(np.median([r.estimate.elapsed_ms for r in ok])),
         coverage_95=np.mean(np.abs(p - truth) <= 1.96 * stds, axis=0) if np.all(np.isfinite(stds)) else
-        np.full(3, np.nan),
+        np.full(k, np.nan),
         rms_error=np.sqrt(np.mean((p - truth) ** 2, axis=0)),
         model_warn_share=_model_warn_share(ok),
     )

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.method import METHODS
+from rozyn_estimator.method import METHODS, PipelineConfig
 from rozyn_estimator.method.full import FULL_PARAM_NAMES, FullEstimate, estimate_full
 from rozyn_estimator.tools.trial import parallel_map, parse_seeds
 from rozyn_estimator.vehicle_full import FullVehicle, load_full_vehicle
@@ -40,6 +40,7 @@ class FullTrialSpec:
     sim: SimConfig  # model full; its seed is replaced per trial
     noise_fraction: float = 0.0  # white sensor noise, share of each channel's rms
     method: str = "likelihood"
+    pipeline: PipelineConfig | None = None  # overrides the method's settings (rozyn study's)
 
     @property
     def vehicle(self) -> FullVehicle:
@@ -100,7 +101,8 @@ def simulate_full(spec: FullTrialSpec, seed: int) -> tuple[np.ndarray, np.ndarra
 def run_full_trial(spec: FullTrialSpec, seed: int) -> FullTrialResult:
     """Simulate one seeded full-car run and estimate."""
     accel, speed, channels, sim_ms = simulate_full(spec, seed)
-    est = estimate_full(accel, spec.sim.rate_hz, spec.vehicle, METHODS[spec.method], speed, sensors=channels)
+    cfg = spec.pipeline or METHODS[spec.method]
+    est = estimate_full(accel, spec.sim.rate_hz, spec.vehicle, cfg, speed, sensors=channels)
     return FullTrialResult(seed, est, spec.truth, sim_ms)
 
 
