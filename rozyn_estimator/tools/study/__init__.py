@@ -2,6 +2,8 @@
 
 Modules, by concern (each imports its siblings directly, never this package):
 
+- :mod:`~rozyn_estimator.tools.study.models`: the half car and the full car (``--model``):
+  their parameters, modes, accelerometers and methods;
 - :mod:`~rozyn_estimator.tools.study.settings`: the grid, :class:`StudySettings`, the grid
   options' syntax and the names of the files a study writes;
 - :mod:`~rozyn_estimator.tools.study.results`: trial rows and ``results.csv``;

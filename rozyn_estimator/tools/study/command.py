@@ -1,12 +1,15 @@
 """``rozyn study``: the thesis' Monte-Carlo grids (chapter 5) as one command.
 
 Every (road, speed, measurement time, trial) of a grid is one seeded trial
-(:func:`rozyn_estimator.tools.trial.run_trial`). Trials run in chunks on local processes or on
-a Dask distributed cluster (``--scheduler``); the parent process appends each finished
-chunk to ``results.csv``, so an interrupted study resumes where it stopped. Each trial's
-seed is a function of the study's seed base, the cell and the trial number only, and
-each trial runs on one BLAS thread: the results are bit-identical whatever the number
-of workers, and a finished study's ``results.csv`` is written in grid order.
+(:func:`rozyn_estimator.tools.trial.run_trial`; with ``--model full`` the 7-DOF full car's,
+:func:`rozyn_estimator.tools.trial_full.run_full_trial`, five parameters). Trials run in
+chunks on local processes or on a Dask distributed cluster (``--scheduler``); the parent
+process appends each finished chunk to ``results.csv``, so an interrupted study resumes
+where it stopped. Each trial's seed is a function of the study's seed base, the cell and
+the trial number only, and each trial runs on one BLAS thread: the results are
+bit-identical whatever the number of workers, and a finished study's ``results.csv`` is
+written in grid order. ``study.json`` records the model; a study is not continued as the
+other model's.
 
 Files in the output directory:
 
@@ -31,7 +34,15 @@ from typing import Any
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS
-from rozyn_estimator.tools.study.directory import check_same_study, load_manifest, prepare_dir, write_manifest
+from rozyn_estimator.tools.compare_full import FULL_PRESETS
+from rozyn_estimator.tools.study.directory import (
+    check_model,
+    check_same_study,
+    load_manifest,
+    prepare_dir,
+    write_manifest,
+)
+from rozyn_estimator.tools.study.models import FULL, MODELS
 from rozyn_estimator.tools.study.outputs import write_outputs, write_tables
 from rozyn_estimator.tools.study.results import TrialRow, read_results
 from rozyn_estimator.tools.study.settings import (
@@ -52,8 +63,10 @@ from rozyn_estimator.tools.study.work import (
     connect_scheduler,
     run_study,
 )
+from rozyn_estimator.tools.suites import VEHICLE_PRESETS
 from rozyn_estimator.tools.trial import default_jobs
-from rozyn_estimator.vehicle import load_vehicle
+from rozyn_estimator.vehicle import Vehicle
+from rozyn_estimator.vehicle_full import FullVehicle, load_any_vehicle, load_full_vehicle
 
 HELP = "Monte-Carlo grid of the thesis: speed x measurement time x road, tables and plots"
 DESCRIPTION = (
@@ -61,12 +74,18 @@ DESCRIPTION = (
     "thesis' chapter 5 grid, 2 roads x 8 speeds x 12 durations x 100 trials), on local "
     "processes or a Dask cluster. Writes results.csv (one row per trial, as they finish), "
     "summary.csv/.md (mean, std, bias, failures per cell), figures/*.png and study.json "
-    "into --out. An interrupted study continues with --resume."
+    "into --out. An interrupted study continues with --resume. --model full studies the 7-DOF "
+    "full car (four corner accelerometers: roll inertia and lateral CoG too)."
 )
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     grid = p.add_argument_group("grid (default: the thesis' chapter 5 grid)")
+    grid.add_argument("--model", choices=tuple(MODELS),
+                      help="half: the half car (front and rear accelerometers; m, I_yy, l_f); full: the "
+                           "7-DOF full car on two road tracks, four corner accelerometers (m, I_xx, I_yy, "
+                           f"l_f, y_c; methods {', '.join(FULL.methods)}; --vehicle then takes a full-car "
+                           "file) (default: half; on --resume: the study's)")
     grid.add_argument("--roads", metavar="LIST", help="comma list of iso, laplace (default: iso,laplace)")
     grid.add_argument("--speeds-kmh", metavar="GRID",
                       help="speeds: START:STOP:STEP and/or a comma list (default: 30:100:10)")
@@ -84,8 +103,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                       help="white sensor noise as a share of each channel's rms, e.g. 0.1 (default: 0)")
     grid.add_argument("--method", choices=tuple(METHODS), metavar="NAME",
                       help=f"estimation method: {', '.join(METHODS)} (default: {default_method()}, "
-                           "Rozyn's pipeline without refinement)")
-    grid.add_argument("--vehicle", metavar="FILE.yaml", help="vehicle parameters (default: thesis Table 5-1)")
+                           "Rozyn's pipeline without refinement; --model full: "
+                           f"{', '.join(FULL.methods)}, default {FULL.default_method})")
+    vehicle = grid.add_mutually_exclusive_group()
+    vehicle.add_argument("--vehicle", metavar="FILE.yaml",
+                         help="vehicle parameters (default: thesis Table 5-1; --model full: a file with "
+                              "model: full, e.g. config/vehicle_full.yaml)")
+    vehicle.add_argument("--vehicle-preset", choices=tuple(VEHICLE_PRESETS),
+                         help="a built-in vehicle: table5-1 (the default) or second (heavier, longer; the "
+                              "full car's: an SUV with its CoG 3 cm left of the centreline)")
     grid.add_argument("--seed-base", type=int, metavar="N", help="changes every road seed (default: 0)")
 
     run = p.add_argument_group("running")
@@ -110,30 +136,54 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-_SETTING_ARGS = ("roads", "speeds_kmh", "durations_s", "trials", "amplitudes", "road_class", "laplace_nu",
-                 "rate_hz", "noise_std_mps2", "noise_fraction", "method", "seed_base", "vehicle")
+_GRID_ARGS = ("roads", "speeds_kmh", "durations_s", "trials", "amplitudes", "road_class", "laplace_nu",
+              "rate_hz", "noise_std_mps2", "noise_fraction", "method", "seed_base")
+_SETTING_ARGS = ("model", *_GRID_ARGS, "vehicle", "vehicle_preset")
 
 
 def settings_from_args(args: argparse.Namespace, base: StudySettings | None = None) -> StudySettings:
-    """The study's settings: ``base`` (or the defaults) with the options given on the command line."""
+    """The study's settings: ``base`` (or the defaults) with the options given on the command line.
+
+    Raises:
+        ConfigError: an invalid option, or ``--model`` other than ``base``'s (a stored study's).
+    """
     parsers: dict[str, Callable[[Any], Any]] = {
         "roads": parse_roads,
         "speeds_kmh": lambda t: parse_grid(t, "speeds-kmh"),
         "durations_s": lambda t: parse_grid(t, "durations-s"),
         "road_class": lambda t: str(t).upper(),
-        "vehicle": load_vehicle,
     }
-    changes = {}
-    for name in _SETTING_ARGS:
+    model = getattr(args, "model", None)
+    if base is not None and model is not None:
+        check_model(base.model, model, args.out)
+    model = model or (base.model if base is not None else "half")
+    changes: dict[str, Any] = {"model": model}
+    for name in _GRID_ARGS:
         value = getattr(args, name, None)
         if value is not None:
             changes[name] = parsers.get(name, lambda v: v)(value)
+    vehicle = _vehicle(args, model)
+    if vehicle is not None:
+        changes["full_vehicle" if model == "full" else "vehicle"] = vehicle
     try:
         return dataclasses.replace(base, **changes) if base else StudySettings(**changes)
     except ConfigError:
         raise
     except (TypeError, ValueError) as exc:
         raise ConfigError(str(exc)) from None
+
+
+def _vehicle(args: argparse.Namespace, model: str) -> Vehicle | FullVehicle | None:
+    """The vehicle of ``--vehicle`` or ``--vehicle-preset`` for the model (None: neither given)."""
+    path, preset = getattr(args, "vehicle", None), getattr(args, "vehicle_preset", None)
+    if model == "full":
+        return load_full_vehicle(path) if path else FULL_PRESETS[preset] if preset else None
+    if path:
+        vehicle = load_any_vehicle(path)
+        if isinstance(vehicle, FullVehicle):
+            raise ConfigError(f"{path}: a full-car vehicle file (model: full); study it with --model full")
+        return vehicle
+    return VEHICLE_PRESETS[preset] if preset else None
 
 
 def _parse_cell(text: str | None) -> tuple[float, float] | None:
@@ -183,7 +233,7 @@ def _stored_study(args: argparse.Namespace) -> tuple[StudySettings, list[TrialRo
         check_same_study(manifest, settings_from_args(args, settings), args.out)
     if not (args.out / RESULTS).exists():
         raise ConfigError(f"{args.out}: no {RESULTS} to plot")
-    return settings, read_results(args.out / RESULTS)
+    return settings, read_results(args.out / RESULTS, settings.car)
 
 
 def _run_grid(args: argparse.Namespace) -> tuple[StudySettings, list[TrialRow]]:
@@ -219,6 +269,7 @@ def _print_done(out_dir: Path, settings: StudySettings, rows: Sequence[TrialRow]
 
 def _print_run(report: RunReport) -> None:
     if report.trials_run:
-        print(f"ran {report.trials_run} trials in {report.wall_s:.1f} s ({report.trials_per_s:.0f} trials/s)")
+        rate = f"{report.trials_per_s:.0f}" if report.trials_per_s >= 10 else f"{report.trials_per_s:.2g}"
+        print(f"ran {report.trials_run} trials in {report.wall_s:.1f} s ({rate} trials/s)")
     else:
         print("nothing to run: every trial is in the results already")

@@ -2,7 +2,8 @@
 
 The study does not store the records; the same seeds give the same records as the
 study's trials, so :func:`cell_correlations` simulates them again (the thesis' Figs 5-3,
-5-4, 5-14, 5-15).
+5-4, 5-14, 5-15): the half car's front and rear accelerometers, or the full car's four
+corners.
 """
 
 from __future__ import annotations
@@ -17,7 +18,9 @@ import numpy as np
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.tools.study.settings import Cell, StudySettings
 from rozyn_estimator.tools.study.work import one_blas_thread
+from rozyn_estimator.tools.trial_full import FullTrialSpec, simulate_full
 from rozyn_estimator.vehicle import Vehicle
+from rozyn_estimator.vehicle_full import FullVehicle
 
 
 @dataclass(frozen=True)
@@ -26,7 +29,7 @@ class CellCorrelations:
 
     cell: Cell
     lag_s: np.ndarray  # (n_lags,)
-    acf: np.ndarray  # (n_trials, n_lags, 2): R_ii(tau) / R_ii(0), front and rear
+    acf: np.ndarray  # (n_trials, n_lags, k): R_ii(tau) / R_ii(0), per accelerometer (the model's channels)
     fit_lags_s: tuple[float, float]  # the lags the pipeline identifies from [s]
 
 
@@ -44,13 +47,18 @@ def cell_correlations(
     trials = range(min(100, settings.trials)) if trials is None else trials
     spec = settings.trial_spec(cell)
     max_lag = round(max_lag_s * settings.rate_hz)
-    acf = np.empty((len(trials), max_lag + 1, 2))
+    acf = np.empty((len(trials), max_lag + 1, len(settings.car.channels)))
     for i, trial in enumerate(trials):
-        y = Simulation(spec.sim_config(settings.seed(cell, trial))).run(cell.duration_s).accel_mps2
+        seed = settings.seed(cell, trial)
+        if isinstance(spec, FullTrialSpec):  # the full car's record with its noise, as its trial's
+            y = simulate_full(spec, seed)[0]
+        else:
+            y = Simulation(spec.sim_config(seed)).run(cell.duration_s).accel_mps2
         sums = correlation_sums(y - y.mean(axis=0), max_lag)[0]
-        acf[i] = np.column_stack([sums[:, 0, 0] / sums[0, 0, 0], sums[:, 1, 1] / sums[0, 1, 1]])
+        acf[i] = np.column_stack([sums[:, j, j] / sums[0, j, j] for j in range(acf.shape[2])])
     return CellCorrelations(cell, np.arange(max_lag + 1) / settings.rate_hz, acf,
-                            fit_lag_window_s(settings.pipeline_config(), settings.vehicle, cell.speed_kmh))
+                            fit_lag_window_s(settings.pipeline_config(), settings.studied_vehicle,
+                                             cell.speed_kmh))
 
 
 def focus_correlations(
@@ -71,7 +79,9 @@ def _correlation_task(task: tuple[StudySettings, Cell, tuple[int, ...]]) -> Cell
     return cell_correlations(*task)
 
 
-def fit_lag_window_s(cfg: PipelineConfig, vehicle: Vehicle, speed_kmh: float) -> tuple[float, float]:
+def fit_lag_window_s(
+    cfg: PipelineConfig, vehicle: Vehicle | FullVehicle, speed_kmh: float
+) -> tuple[float, float]:
     """First and last correlation lag the pipeline uses at a speed [s] (pipeline step 1)."""
     first = cfg.min_lag_s
     if cfg.skip_wheelbase_delay:

@@ -49,11 +49,11 @@ def prepare_dir(out_dir: Path, settings: StudySettings, resume: bool, force: boo
                               f"use --force to start over")
         check_same_study(load_manifest(out_dir), settings, out_dir)
         if results.exists():
-            rows, clean = scan_results(results)
+            rows, clean = scan_results(results, settings.car)
             wanted = set(settings.cells())
             kept = [r for r in rows if r.cell in wanted and r.trial < settings.trials]
             if not clean or len(kept) != len(rows):
-                write_results(results, kept)
+                write_results(results, kept, settings.car)
             return kept
     out_dir.mkdir(parents=True, exist_ok=True)
     return []
@@ -93,9 +93,18 @@ def write_manifest(out_dir: Path, data: dict[str, Any]) -> None:
     os.replace(tmp, out_dir / MANIFEST)
 
 
+def check_model(stored: str, asked: str, out_dir: Path) -> None:
+    """Refuse to continue (or plot) a study of one vehicle model as the other's."""
+    if stored != asked:
+        raise ConfigError(f"{out_dir} holds a study of the {stored} car (--model {stored}), not of the "
+                          f"{asked} car; leave --model out to continue it, use another --out, or --force to "
+                          "start over")
+
+
 def check_same_study(manifest: dict[str, Any], settings: StudySettings, out_dir: Path) -> None:
     """Refuse to resume a study with other settings (naming what differs)."""
     old = manifest["settings"]
+    check_model(old.get("model", "half"), settings.model, out_dir)
     new = json.loads(json.dumps(settings.to_dict()))
     differ = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
     if differ:

@@ -43,7 +43,7 @@ def nearest_cell(settings: StudySettings, speed_kmh: float, duration_s: float) -
 def write_tables(out_dir: Path, settings: StudySettings, rows: Sequence[TrialRow]) -> list[CellSummary]:
     """``summary.csv`` and ``summary.md`` from the results; returns the cells' summaries."""
     summaries = summarise_cells(settings, rows)
-    write_summary_csv(summaries, out_dir / SUMMARY_CSV)
+    write_summary_csv(summaries, out_dir / SUMMARY_CSV, settings.car)
     lines = [*summary_markdown(settings, summaries), "", *shortest_drive_markdown(settings, summaries)]
     (out_dir / SUMMARY_MD).write_text("\n".join(lines) + "\n")
     return summaries

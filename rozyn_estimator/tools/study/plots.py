@@ -16,6 +16,9 @@ The thesis' chapter 5 figures, from a study's summaries and trials:
 - ``acf_<cell>.png``: the cell's normalised autocorrelations (Figs 5-3, 5-4, 5-14, 5-15);
 - ``failures.png``: failed trials per cell, only when there are any.
 
+A panel per parameter of the study's model (the half car's three, the full car's five);
+the autocorrelations per accelerometer (front and rear, or the four corners).
+
 Figures are built on ``matplotlib.figure.Figure`` directly (no pyplot state), so this
 module is safe to use from any thread or process.
 """
@@ -31,7 +34,6 @@ import numpy as np
 from matplotlib import colors, ticker
 from matplotlib.figure import Figure
 
-from rozyn_estimator.method import PARAM_NAMES
 from rozyn_estimator.tools.study.correlations import CellCorrelations
 from rozyn_estimator.tools.study.precision import TARGET_PCT, TARGET_SIGMAS, shortest_drives
 from rozyn_estimator.tools.study.results import TrialRow
@@ -41,9 +43,6 @@ from rozyn_estimator.tools.study.summary import CellSummary
 matplotlib.use("Agg")
 
 DPI = 100
-SYMBOLS = {"mass_kg": "m", "pitch_inertia_kgm2": "I_yy", "cog_from_front_axle_m": "l_f"}
-UNITS = {"mass_kg": "kg", "pitch_inertia_kgm2": "kg m²", "cog_from_front_axle_m": "m"}
-NAMES = {"mass_kg": "mass", "pitch_inertia_kgm2": "pitch inertia", "cog_from_front_axle_m": "CoG position"}
 
 
 def road_label(settings: StudySettings, road: str) -> str:
@@ -144,28 +143,31 @@ def _value_format(values: np.ndarray) -> str:
 
 def std_heatmaps(settings: StudySettings, summaries: Sequence[CellSummary], road: str) -> Figure:
     std = grid_values(settings, summaries, road, "std")
-    fig = Figure(figsize=(16, 4.6), layout="constrained")
-    axes = fig.subplots(1, 3)
-    for k, name in enumerate(PARAM_NAMES):
+    params = settings.car.params
+    fig = Figure(figsize=(16 * len(params) / 3, 4.6), layout="constrained")
+    axes = fig.subplots(1, len(params))
+    for k, p in enumerate(params):
         values = std[:, :, k]
-        _heatmap(fig, axes[k], settings, values, f"std of {SYMBOLS[name]} [{UNITS[name]}]",
+        _heatmap(fig, axes[k], settings, values, f"std of {p.symbol} [{p.unit}]",
                  _value_format(values), _std_norm(values), "viridis")
-        axes[k].set_title(f"{NAMES[name]} {SYMBOLS[name]}: std [{UNITS[name]}]")
+        axes[k].set_title(f"{p.label} {p.symbol}: std [{p.unit}]")
     fig.suptitle(f"Std of the estimates over {settings.trials} roads per cell — {road_label(settings, road)}")
     return fig
 
 
 def bias_heatmaps(settings: StudySettings, summaries: Sequence[CellSummary], road: str) -> Figure:
     bias = grid_values(settings, summaries, road, "bias_pct")
-    fig = Figure(figsize=(16, 4.6), layout="constrained")
-    axes = fig.subplots(1, 3)
-    for k, name in enumerate(PARAM_NAMES):
+    params = settings.car.params
+    fig = Figure(figsize=(16 * len(params) / 3, 4.6), layout="constrained")
+    axes = fig.subplots(1, len(params))
+    for k, p in enumerate(params):
         values = bias[:, :, k]
         finite = np.abs(values[np.isfinite(values)])
         top = max(float(finite.max()) if finite.size else 1.0, 0.5)
-        _heatmap(fig, axes[k], settings, values, f"bias of mean {SYMBOLS[name]} [%]", "{:+.1f}",
+        _heatmap(fig, axes[k], settings, values, f"bias of mean {p.symbol} [%]", "{:+.1f}",
                  colors.Normalize(-top, top), "RdBu_r")
-        axes[k].set_title(f"{NAMES[name]} {SYMBOLS[name]}: (mean / truth − 1) [%]")
+        share = "(mean − truth) / half track" if p.of_half_track else "(mean / truth − 1)"
+        axes[k].set_title(f"{p.label} {p.symbol}: {share} [%]")
     fig.suptitle(f"Bias of the mean estimate vs truth — {road_label(settings, road)}")
     return fig
 
@@ -173,15 +175,16 @@ def bias_heatmaps(settings: StudySettings, summaries: Sequence[CellSummary], roa
 def std_ratio_heatmaps(settings: StudySettings, summaries: Sequence[CellSummary]) -> Figure:
     laplace, iso = (grid_values(settings, summaries, road, "std") for road in ("laplace", "iso"))
     ratio = laplace / iso
-    fig = Figure(figsize=(16, 4.6), layout="constrained")
-    axes = fig.subplots(1, 3)
-    for k, name in enumerate(PARAM_NAMES):
+    params = settings.car.params
+    fig = Figure(figsize=(16 * len(params) / 3, 4.6), layout="constrained")
+    axes = fig.subplots(1, len(params))
+    for k, p in enumerate(params):
         values = ratio[:, :, k]
         finite = values[np.isfinite(values) & (values > 0)]
         median = float(np.median(finite)) if finite.size else float("nan")
         _heatmap(fig, axes[k], settings, values, "std Laplace / std ISO [–]", "{:.1f}",
                  _std_norm(values), "magma")
-        axes[k].set_title(f"{NAMES[name]} {SYMBOLS[name]}: median ratio {median:.1f}")
+        axes[k].set_title(f"{p.label} {p.symbol}: median ratio {median:.1f}")
     fig.suptitle(f"Std on the Laplace road (ν = {settings.laplace_nu:g}) over std on the ISO road "
                  f"({settings.amplitudes} amplitudes); the thesis reports ≈ 5")
     return fig
@@ -190,25 +193,26 @@ def std_ratio_heatmaps(settings: StudySettings, summaries: Sequence[CellSummary]
 def std_lines(settings: StudySettings, summaries: Sequence[CellSummary], road: str) -> Figure:
     """Std vs measurement time (a line per speed) and vs speed (a line per time)."""
     std = grid_values(settings, summaries, road, "std")
-    fig = Figure(figsize=(12, 10), layout="constrained")
-    axes = fig.subplots(3, 2)
+    params = settings.car.params
+    fig = Figure(figsize=(12, 10 * len(params) / 3), layout="constrained")
+    axes = fig.subplots(len(params), 2)
     speeds = np.array(settings.speeds_kmh)
     durations = np.array(settings.durations_s)
     speed_colors = matplotlib.colormaps["viridis"](np.linspace(0, 0.9, len(speeds)))
     picks = np.linspace(0, len(durations) - 1, min(6, len(durations))).round().astype(int)
     shown = durations[np.unique(picks)]
     time_colors = matplotlib.colormaps["plasma"](np.linspace(0, 0.85, len(shown)))
-    for k, name in enumerate(PARAM_NAMES):
+    for k, p in enumerate(params):
         left, right = axes[k]
         for i, speed in enumerate(speeds):
             left.plot(durations, std[i, :, k], "o-", ms=3, color=speed_colors[i], label=f"{speed:g} km/h")
         for color, duration in zip(time_colors, shown, strict=True):
             j = int(np.flatnonzero(durations == duration)[0])
             right.plot(speeds, std[:, j, k], "o-", ms=3, color=color, label=f"{duration:g} s")
-        ylabel = f"std of {SYMBOLS[name]} [{UNITS[name]}]"
+        ylabel = f"std of {p.symbol} [{p.unit}]"
         left.set(xlabel="measurement time [s]", ylabel=ylabel,
-                 title=f"{NAMES[name]}: std vs measurement time")
-        right.set(xlabel="speed [km/h]", ylabel=ylabel, title=f"{NAMES[name]}: std vs speed")
+                 title=f"{p.label}: std vs measurement time")
+        right.set(xlabel="speed [km/h]", ylabel=ylabel, title=f"{p.label}: std vs speed")
         for ax in (left, right):
             if np.nanmax(std[:, :, k]) > 5 * np.nanmin(std[:, :, k]):
                 ax.set_yscale("log")
@@ -224,10 +228,11 @@ def precision_lines(settings: StudySettings, summaries: Sequence[CellSummary], r
     for 1 % starred; below, when the method publishes a std, its 95 % coverage per cell."""
     from scipy.stats import binom
 
-    rel = grid_values(settings, summaries, road, "std") / np.abs(_truth(settings)) * 100.0
+    params = settings.car.params
+    rel = grid_values(settings, summaries, road, "std") / np.abs(settings.reference()) * 100.0
     coverage = any(s.with_std for s in summaries if s.cell.road == road)
-    fig = Figure(figsize=(15, 8.4 if coverage else 4.6), layout="constrained")
-    axes = np.atleast_2d(fig.subplots(2 if coverage else 1, 3, sharex=True))
+    fig = Figure(figsize=(15 * len(params) / 3, 8.4 if coverage else 4.6), layout="constrained")
+    axes = np.atleast_2d(fig.subplots(2 if coverage else 1, len(params), sharex=True))
     speeds, durations = settings.speeds_kmh, np.array(settings.durations_s)
     palette = matplotlib.colormaps["viridis"](np.linspace(0, 0.9, len(speeds)))
     drives = {d.speed_kmh: d.duration_s for d in shortest_drives(settings, summaries) if d.road == road}
@@ -235,11 +240,11 @@ def precision_lines(settings: StudySettings, summaries: Sequence[CellSummary], r
                for stat in ("coverage_95", "coverage_95_statistical")}
     lo, hi = (100.0 * binom.ppf(q, settings.trials, 0.95) / settings.trials for q in (0.025, 0.975))
     floor = float(np.nanmin(np.append(np.concatenate([c.ravel() for c in covered.values()]), lo)))
-    for k, name in enumerate(PARAM_NAMES):
+    for k, p in enumerate(params):
         top = axes[0, k]
         for i, (speed, color) in enumerate(zip(speeds, palette, strict=True)):
             top.plot(durations, rel[i, :, k], "o-", ms=3, color=color, label=f"{speed:g} km/h")
-            best = drives.get(speed, (None,) * 3)[k]
+            best = drives.get(speed, (None,) * len(params))[k]
             if best is not None:
                 j = int(np.flatnonzero(durations == best)[0])
                 top.plot(best, rel[i, j, k], "*", ms=13, color=color, mec="black", mew=0.6)
@@ -250,7 +255,7 @@ def precision_lines(settings: StudySettings, summaries: Sequence[CellSummary], r
             top.set_yscale("log")
             top.yaxis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))  # 0.1, 1, 10
             top.yaxis.set_minor_formatter(ticker.FuncFormatter(_minor_label))  # 0.2, 0.3, 0.5, 2
-        top.set(ylabel=f"std of {SYMBOLS[name]} [% of truth]", title=f"{NAMES[name]} {SYMBOLS[name]}: std")
+        top.set(ylabel=f"std of {p.symbol} [% of {p.relative_to}]", title=f"{p.label} {p.symbol}: std")
         top.grid(True, which="both", alpha=0.3)
         if coverage:
             bottom = axes[1, k]
@@ -264,7 +269,7 @@ def precision_lines(settings: StudySettings, summaries: Sequence[CellSummary], r
             bottom.plot([], [], "k-", label="published std")
             bottom.plot([], [], "k--", label="statistical part")
             bottom.set(ylabel="coverage of ±1.96 std [%]", ylim=(floor - 5.0, 102.0),
-                       title=f"{NAMES[name]} {SYMBOLS[name]}: coverage")
+                       title=f"{p.label} {p.symbol}: coverage")
             bottom.grid(True, alpha=0.3)
     for ax in axes[-1]:
         ax.set_xlabel("measurement time [s]")
@@ -284,32 +289,27 @@ def _minor_label(value: float, _: int) -> str:
     return f"{value:g}" if value > 0 and f"{value:.0e}"[0] in "235" else ""
 
 
-def _cell_params(rows: Sequence[TrialRow], cell: Cell) -> np.ndarray:
+def _cell_params(settings: StudySettings, rows: Sequence[TrialRow], cell: Cell) -> np.ndarray:
     params = [r.params for r in rows if r.cell == cell and r.params is not None]
-    return np.array(params, dtype=float).reshape(-1, 3)
-
-
-def _truth(settings: StudySettings) -> np.ndarray:
-    v = settings.vehicle
-    return np.array([v.sprung_mass_kg, v.pitch_inertia_kgm2, v.cog_from_front_axle_m])
+    return np.array(params, dtype=float).reshape(-1, len(settings.car.params))
 
 
 def histograms(settings: StudySettings, rows: Sequence[TrialRow], cells: Sequence[Cell]) -> Figure:
     """Estimates of one speed and time, a row per road (Figs 5-7 to 5-9, 5-16 to 5-18)."""
-    truth = _truth(settings)
-    fig = Figure(figsize=(14, 3.4 * len(cells) + 0.6), layout="constrained")
-    axes = np.atleast_2d(fig.subplots(len(cells), 3))
+    truth, names = settings.truth(), settings.car.params
+    fig = Figure(figsize=(14 * len(names) / 3, 3.4 * len(cells) + 0.6), layout="constrained")
+    axes = np.atleast_2d(fig.subplots(len(cells), len(names)))
     for r, cell in enumerate(cells):
-        params = _cell_params(rows, cell)
-        for k, name in enumerate(PARAM_NAMES):
+        params = _cell_params(settings, rows, cell)
+        for k, p in enumerate(names):
             ax = axes[r, k]
             if len(params):
                 ax.hist(params[:, k], bins=min(25, max(5, len(params) // 4)), color="tab:blue", alpha=0.8)
                 mean, std = params[:, k].mean(), params[:, k].std(ddof=1) if len(params) > 1 else 0.0
                 ax.axvline(mean, color="tab:red", label=f"mean {mean:.4g} (std {std:.3g})")
             ax.axvline(truth[k], color="black", ls="--", label=f"truth {truth[k]:g}")
-            ax.set(xlabel=f"{NAMES[name]} {SYMBOLS[name]} [{UNITS[name]}]", ylabel="trials",
-                   title=f"{cell.road}: {NAMES[name]}")
+            ax.set(xlabel=f"{p.label} {p.symbol} [{p.unit}]", ylabel="trials",
+                   title=f"{cell.road}: {p.label}")
             ax.legend(fontsize=7)
     cell = cells[0]
     fig.suptitle(f"Estimates over {settings.trials} roads at {cell.speed_kmh:g} km/h, {cell.duration_s:g} s "
@@ -319,17 +319,19 @@ def histograms(settings: StudySettings, rows: Sequence[TrialRow], cells: Sequenc
 
 def error_boxplot(settings: StudySettings, rows: Sequence[TrialRow], cells: Sequence[Cell]) -> Figure:
     """Relative errors of one speed and time, a box per road (Figs 5-10, 5-19)."""
-    truth = _truth(settings)
-    fig = Figure(figsize=(12, 4.4), layout="constrained")
-    axes = fig.subplots(1, 3)
-    for k, name in enumerate(PARAM_NAMES):
+    car, truth, reference = settings.car, settings.truth(), settings.reference()
+    fig = Figure(figsize=(12 * len(car.params) / 3, 4.4), layout="constrained")
+    axes = fig.subplots(1, len(car.params))
+    errors_pct = [car.relative_pct(_cell_params(settings, rows, c), truth, reference) for c in cells]
+    for k, p in enumerate(car.params):
         ax = axes[k]
-        errors = [(_cell_params(rows, c)[:, k] / truth[k] - 1.0) * 100.0 for c in cells]
+        errors = [e[:, k] for e in errors_pct]
         ax.boxplot(errors, tick_labels=[c.road for c in cells])
         for level in (-6.0, 6.0):
             ax.axhline(level, color="grey", ls=":", lw=1)
         ax.axhline(0.0, color="black", lw=0.8)
-        ax.set(ylabel=f"error of {SYMBOLS[name]} [%]", xlabel="road", title=f"{NAMES[name]} {SYMBOLS[name]}")
+        of = " of half track" if p.of_half_track else ""
+        ax.set(ylabel=f"error of {p.symbol} [%{of}]", xlabel="road", title=f"{p.label} {p.symbol}")
         ax.grid(True, axis="y", alpha=0.3)
     cell = cells[0]
     fig.suptitle(f"Errors (estimate / truth − 1) at {cell.speed_kmh:g} km/h, {cell.duration_s:g} s, "
@@ -338,18 +340,19 @@ def error_boxplot(settings: StudySettings, rows: Sequence[TrialRow], cells: Sequ
 
 
 def correlation_overlay(settings: StudySettings, correlations: Sequence[CellCorrelations]) -> Figure:
-    """Every trial's normalised autocorrelation, front and rear, a row per road."""
-    fig = Figure(figsize=(13, 3.6 * len(correlations) + 0.6), layout="constrained")
-    axes = np.atleast_2d(fig.subplots(len(correlations), 2, sharey=True))
+    """Every trial's normalised autocorrelation, a row per road, a column per accelerometer."""
+    channels = settings.car.channels
+    fig = Figure(figsize=(6.5 * len(channels), 3.6 * len(correlations) + 0.6), layout="constrained")
+    axes = np.atleast_2d(fig.subplots(len(correlations), len(channels), sharey=True))
     for r, corr in enumerate(correlations):
         first, last = corr.fit_lags_s
-        for c, side in enumerate(("front", "rear")):
+        for c, (side, sub) in enumerate(channels):
             ax = axes[r, c]
             ax.plot(corr.lag_s, corr.acf[:, :, c].T, color="tab:blue", lw=0.5, alpha=0.25)
             ax.plot(corr.lag_s, corr.acf[:, :, c].mean(axis=0), color="black", lw=1.2, label="mean")
             ax.axvspan(0, first, color="tab:red", alpha=0.08, label=f"skipped: lag < {first:.2f} s")
             ax.axvspan(first, last, color="tab:green", alpha=0.08, label="lags the estimator uses")
-            ax.set(xlabel="lag τ [s]", ylabel=f"R_{side[0]}{side[0]}(τ) / R_{side[0]}{side[0]}(0) [–]",
+            ax.set(xlabel="lag τ [s]", ylabel=f"R_{sub}{sub}(τ) / R_{sub}{sub}(0) [–]",
                    title=f"{corr.cell.road}: {side} acceleration, {len(corr.acf)} roads")
             ax.set_xlim(0, corr.lag_s[-1])
             ax.grid(True, alpha=0.3)

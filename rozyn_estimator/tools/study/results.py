@@ -10,6 +10,10 @@ the data's part and the tolerances' propagated together) and ``<param>_std_stati
 the data's part alone (the budget's statistical covariance; the covariance itself when
 there is no budget). Files written before these columns existed (:data:`LEGACY_COLUMNS`)
 are read as rows without a std.
+
+The columns follow the study's model (:func:`columns`): the half car's three parameters and
+two modes (:data:`COLUMNS`), or the full car's five parameters and three modes
+(:data:`FULL_COLUMNS`).
 """
 
 from __future__ import annotations
@@ -23,19 +27,36 @@ from pathlib import Path
 import numpy as np
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.method import PARAM_NAMES, Estimate
+from rozyn_estimator.method import Estimate
+from rozyn_estimator.method.full import FullEstimate
+from rozyn_estimator.tools.study.models import FULL, HALF, StudyModel
 from rozyn_estimator.tools.study.settings import Cell, StudySettings, fmt_value
 from rozyn_estimator.tools.trial import TrialResult
+from rozyn_estimator.tools.trial_full import FullTrialResult
 
-MODE_COLUMNS = ("mode1_freq_hz", "mode1_damping", "mode2_freq_hz", "mode2_damping")
-STD_COLUMNS = tuple(f"{p}_std" for p in PARAM_NAMES)  # the published std
-STATISTICAL_STD_COLUMNS = tuple(f"{p}_std_statistical" for p in PARAM_NAMES)  # the data's part
 _KEY_COLUMNS = ("road", "speed_kmh", "duration_s", "trial", "seed", "status", "stage")
-COLUMNS = (*_KEY_COLUMNS, *PARAM_NAMES, *STD_COLUMNS, *STATISTICAL_STD_COLUMNS, *MODE_COLUMNS, "reason")
-LEGACY_COLUMNS = (*_KEY_COLUMNS, *PARAM_NAMES, *MODE_COLUMNS, "reason")  # before the std columns
 
-Params = tuple[float, float, float]  # in PARAM_NAMES order
-Modes = tuple[float, float, float, float]  # f1 [Hz], zeta1, f2 [Hz], zeta2
+
+def mode_columns(model: StudyModel) -> tuple[str, ...]:
+    """``mode1_freq_hz``, ``mode1_damping``, … for the model's modes."""
+    return tuple(f"mode{k}_{q}" for k in range(1, model.n_modes + 1) for q in ("freq_hz", "damping"))
+
+
+def columns(model: StudyModel) -> tuple[str, ...]:
+    """The header of a results file: the estimate, its published std (``<param>_std``) and the
+    std's statistical part (``<param>_std_statistical``) per parameter, the modes, the reason."""
+    names = model.names
+    return (*_KEY_COLUMNS, *names, *(f"{p}_std" for p in names), *(f"{p}_std_statistical" for p in names),
+            *mode_columns(model), "reason")
+
+
+COLUMNS = columns(HALF)
+FULL_COLUMNS = columns(FULL)
+LEGACY_COLUMNS = (*_KEY_COLUMNS, *HALF.names, *mode_columns(HALF), "reason")  # before the std columns
+_HEADERS = {COLUMNS: HALF, FULL_COLUMNS: FULL, LEGACY_COLUMNS: HALF}
+
+Params = tuple[float, ...]  # in the model's parameter order
+Modes = tuple[float, ...]  # f1 [Hz], zeta1, f2 [Hz], zeta2 (, f3, zeta3)
 
 
 @dataclass(frozen=True)
@@ -58,38 +79,37 @@ class TrialRow:
         return (self.cell.road, self.cell.speed_kmh, self.cell.duration_s, self.trial)
 
     @classmethod
-    def from_result(cls, cell: Cell, trial: int, result: TrialResult) -> TrialRow:
+    def from_result(cls, cell: Cell, trial: int, result: TrialResult | FullTrialResult) -> TrialRow:
+        """The row of a half-car trial (two modes) or a full-car one (three)."""
         est = result.estimate
+        n_modes = (FULL if isinstance(est, FullEstimate) else HALF).n_modes
         modes: Modes | None = None
-        if len(est.modes) >= 2:
-            first, second = est.modes[:2]
-            modes = (float(first.freq_hz), float(first.damping_ratio),
-                     float(second.freq_hz), float(second.damping_ratio))
+        if len(est.modes) >= n_modes:
+            modes = tuple(float(x) for md in est.modes[:n_modes] for x in (md.freq_hz, md.damping_ratio))
         return cls(cell, trial, result.seed, est.status, _params(est.params), modes, est.reason,
-                   getattr(est, "stage", "rozyn"), _params(est.std), _params(est.statistical_std))
+                   getattr(est, "stage", "rozyn"), _params(est.std), _params(_statistical_std(est)))
 
-    def to_csv(self) -> list[str]:
+    def to_csv(self, model: StudyModel = HALF) -> list[str]:
         def num(values: Sequence[float] | None, n: int) -> list[str]:
             return [""] * n if values is None else [repr(float(v)) for v in values]
 
-        c = self.cell
+        c, k = self.cell, len(model.params)
         return [c.road, fmt_value(c.speed_kmh), fmt_value(c.duration_s), str(self.trial), str(self.seed),
-                self.status, self.stage, *num(self.params, 3), *num(self.std, 3),
-                *num(self.std_statistical, 3), *num(self.modes, 4), self.reason]
+                self.status, self.stage, *num(self.params, k), *num(self.std, k),
+                *num(self.std_statistical, k), *num(self.modes, 2 * model.n_modes), self.reason]
 
     @classmethod
-    def from_csv(cls, record: dict[str, str]) -> TrialRow:
-        """A row from a CSV record (of :data:`COLUMNS`, or :data:`LEGACY_COLUMNS`: no std)."""
-        def nums(names: Sequence[str]) -> list[float] | None:
+    def from_csv(cls, record: dict[str, str], model: StudyModel = HALF) -> TrialRow:
+        """A row from a CSV record (of :func:`columns`, or :data:`LEGACY_COLUMNS`: no std)."""
+        def nums(names: Sequence[str]) -> tuple[float, ...] | None:
             text = [record.get(n, "") for n in names]
-            return None if any(t == "" for t in text) else [float(t) for t in text]
+            return None if any(t == "" for t in text) else tuple(float(t) for t in text)
 
         cell = Cell(record["road"], float(record["speed_kmh"]), float(record["duration_s"]))
-        m = nums(MODE_COLUMNS)
-        modes = None if m is None else (m[0], m[1], m[2], m[3])
+        names = model.names
         return cls(cell, int(record["trial"]), int(record["seed"]), record["status"],
-                   _params(nums(PARAM_NAMES)), modes, record["reason"], record["stage"],
-                   _params(nums(STD_COLUMNS)), _params(nums(STATISTICAL_STD_COLUMNS)))
+                   nums(names), nums(mode_columns(model)), record["reason"], record["stage"],
+                   nums([f"{p}_std" for p in names]), nums([f"{p}_std_statistical" for p in names]))
 
     def to_trial_result(self, truth: np.ndarray) -> TrialResult:
         params = None if self.params is None else np.array(self.params)
@@ -98,22 +118,30 @@ class TrialRow:
 
 
 def _params(values: Sequence[float] | np.ndarray | None) -> Params | None:
-    """Three numbers in PARAM_NAMES order as floats (None stays None)."""
-    if values is None:
-        return None
-    first, second, third = (float(v) for v in values)
-    return (first, second, third)
+    """The parameters as floats (None stays None)."""
+    return None if values is None else tuple(float(v) for v in values)
 
 
-def read_results(path: Path) -> list[TrialRow]:
+def _statistical_std(est: Estimate | FullEstimate) -> np.ndarray | None:
+    """The std of the statistical part alone: the budget's statistical covariance, or the
+    covariance when there is no budget."""
+    cov = est.budget.statistical if est.budget is not None else est.covariance
+    return None if cov is None else np.sqrt(np.diag(cov))
+
+
+def read_results(path: Path, model: StudyModel | None = None) -> list[TrialRow]:
     """The complete rows of a results file (a line cut short by an interruption is skipped)."""
-    rows, _ = scan_results(path)
+    rows, _ = scan_results(path, model)
     return rows
 
 
-def scan_results(path: Path) -> tuple[list[TrialRow], bool]:
+def scan_results(path: Path, model: StudyModel | None = None) -> tuple[list[TrialRow], bool]:
     """(rows, clean): ``clean`` is False when rows cannot be appended to the file as it is:
-    it ends in a partial line, holds a line that is not a row, or has the legacy header."""
+    it ends in a partial line, holds a line that is not a row, or has the legacy header.
+
+    Raises:
+        ConfigError: not a results file, or (``model`` given) one of another model's.
+    """
     with path.open(newline="") as f:
         text = f.read()
     clean = text == "" or text.endswith("\n")
@@ -122,13 +150,16 @@ def scan_results(path: Path) -> tuple[list[TrialRow], bool]:
         lines = lines[:-1]
     reader = csv.DictReader(lines)
     header = tuple(reader.fieldnames or ())
-    if header not in (COLUMNS, LEGACY_COLUMNS):
+    if header not in _HEADERS:
         raise ConfigError(f"{path}: not a study results file (header {reader.fieldnames})")
-    clean = clean and header == COLUMNS
+    found = _HEADERS[header]
+    if model is not None and found is not model:
+        raise ConfigError(f"{path}: results of the {found.name} car, the study's model is {model.name}")
+    clean = clean and header == columns(found)
     rows = []
     for record in reader:
         try:
-            rows.append(TrialRow.from_csv(record))
+            rows.append(TrialRow.from_csv(record, found))
         except (ValueError, TypeError, KeyError):
             clean = False
     return rows, clean
@@ -137,28 +168,30 @@ def scan_results(path: Path) -> tuple[list[TrialRow], bool]:
 class ResultsWriter:
     """Appends trial rows to ``results.csv``, flushed after each chunk."""
 
-    def __init__(self, path: Path, rows: Sequence[TrialRow] = (), rewrite: bool = False) -> None:
+    def __init__(self, path: Path, rows: Sequence[TrialRow] = (), rewrite: bool = False,
+                 model: StudyModel = HALF) -> None:
         self.path = path
+        self.model = model
         if rewrite or not path.exists():
-            write_results(path, rows)
+            write_results(path, rows, model)
         self._file = path.open("a", newline="")
         self._csv = csv.writer(self._file, lineterminator="\n")
 
     def write(self, rows: Iterable[TrialRow]) -> None:
-        self._csv.writerows(r.to_csv() for r in rows)
+        self._csv.writerows(r.to_csv(self.model) for r in rows)
         self._file.flush()
 
     def close(self) -> None:
         self._file.close()
 
 
-def write_results(path: Path, rows: Iterable[TrialRow]) -> None:
+def write_results(path: Path, rows: Iterable[TrialRow], model: StudyModel = HALF) -> None:
     """Write a whole results file (atomically: a new file, then renamed over the old one)."""
     tmp = path.with_suffix(".csv.tmp")
     with tmp.open("w", newline="") as f:
         out = csv.writer(f, lineterminator="\n")
-        out.writerow(COLUMNS)
-        out.writerows(r.to_csv() for r in rows)
+        out.writerow(columns(model))
+        out.writerows(r.to_csv(model) for r in rows)
     os.replace(tmp, path)
 
 

@@ -18,8 +18,13 @@ import numpy as np
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS, PipelineConfig
 from rozyn_estimator.parameters import check, param
+from rozyn_estimator.tools.study.models import MODELS, StudyModel
 from rozyn_estimator.tools.trial import TrialSpec
+from rozyn_estimator.tools.trial_full import FullTrialSpec
 from rozyn_estimator.vehicle import Vehicle, vehicle_from_mapping
+from rozyn_estimator.vehicle_full import FullVehicle, full_vehicle_from_mapping
+from sim_node.road import RoadSpec
+from sim_node.simulation import SimConfig
 
 STUDY_ROADS = ("iso", "laplace")
 THESIS_CELL = (100.0, 100.0)  # km/h, s: the condition of the thesis' Figs 5-3 to 5-10
@@ -54,9 +59,13 @@ class StudySettings:
     """What a study computes; ``study.json`` records it and ``--resume`` compares it.
 
     The road, sensor and method settings are checked once more as each cell's
-    :class:`TrialSpec` (the first and the last cell are built here).
+    :class:`TrialSpec` (the first and the last cell are built here). The half car's
+    ``study.json`` holds neither ``model`` nor ``full_vehicle`` (as before the full car);
+    the full car's holds ``model: full`` and its car as ``vehicle``.
     """
 
+    model: str = param("half", "vehicle model: half (front and rear accelerometers) or full (four corners, "
+                       "two road tracks: roll inertia and lateral CoG too)", choices=tuple(MODELS))
     roads: tuple[str, ...] = param(STUDY_ROADS, "roads of the grid: iso, laplace")
     speeds_kmh: tuple[float, ...] = param(tuple(float(v) for v in range(30, 101, 10)), "speeds of the grid",
                                           unit="km/h", low=0.0, open_low=True)
@@ -71,14 +80,17 @@ class StudySettings:
     noise_std_mps2: float = param(0.0, "white sensor noise", unit="m/s^2")
     noise_fraction: float = param(0.0, "white sensor noise as a share of each channel's rms (0.1: 10 %)",
                                   low=0.0)
-    method: str = param("", "estimation method; empty: default_method()", choices=tuple(METHODS))
+    method: str = param("", "estimation method; empty: the model's default_method()", choices=tuple(METHODS))
     seed_base: int = param(0, "changes every road seed", low=0)
-    vehicle: Vehicle = param(description="the vehicle", default_factory=Vehicle)
+    vehicle: Vehicle = param(description="the half car", default_factory=Vehicle)
+    full_vehicle: FullVehicle = param(description="the full car (model full)", default_factory=FullVehicle)
 
     def __post_init__(self) -> None:
-        if not self.method:
-            object.__setattr__(self, "method", default_method())
+        if not self.method and self.model in MODELS:  # an unknown model is refused by check()
+            object.__setattr__(self, "method", default_method(self.model))
         check(self, (
+            ("method", lambda s: s.method in s.car.methods,
+             f"the full car has {', '.join(MODELS['full'].methods)}"),
             ("roads", lambda s: bool(s.roads), "the grid needs at least one road"),
             ("roads", lambda s: all(r in STUDY_ROADS for r in s.roads),
              f"each road must be one of {', '.join(STUDY_ROADS)}"),
@@ -96,6 +108,24 @@ class StudySettings:
         return [Cell(r, s, d) for r in self.roads for s in self.speeds_kmh for d in self.durations_s]
 
     @property
+    def car(self) -> StudyModel:
+        """What the model estimates and how the study's files name it."""
+        return MODELS[self.model]
+
+    @property
+    def studied_vehicle(self) -> Vehicle | FullVehicle:
+        """The simulated (and assumed) vehicle: the half or the full car."""
+        return self.full_vehicle if self.model == "full" else self.vehicle
+
+    def truth(self) -> np.ndarray:
+        """(k,) the true parameters, in the model's order."""
+        return self.car.truth(self.studied_vehicle)
+
+    def reference(self) -> np.ndarray:
+        """(k,) what the relative statistics are a share of (the truth; the lateral CoG's: the half track)."""
+        return self.car.reference(self.studied_vehicle)
+
+    @property
     def n_trials(self) -> int:
         return len(self.roads) * len(self.speeds_kmh) * len(self.durations_s) * self.trials
 
@@ -108,7 +138,16 @@ class StudySettings:
             cfg = _without_refinement(cfg)
         return cfg if getattr(cfg, "refine", "none") != "none" else cfg.replace(variance="none")
 
-    def trial_spec(self, cell: Cell) -> TrialSpec:
+    def trial_spec(self, cell: Cell) -> TrialSpec | FullTrialSpec:
+        """A cell's trial conditions (the seed picks the road)."""
+        if self.model == "full":
+            road = RoadSpec(kind=cell.road, road_class=self.road_class, amplitudes=self.amplitudes,
+                            laplace_nu=self.laplace_nu)
+            sim = SimConfig(model="full", full_vehicle=self.full_vehicle, road=road,
+                            speed_kmh=cell.speed_kmh, duration_s=cell.duration_s, rate_hz=self.rate_hz,
+                            noise_std_mps2=self.noise_std_mps2)
+            return FullTrialSpec(sim=sim, noise_fraction=self.noise_fraction, method=self.method,
+                                 pipeline=self.pipeline_config())
         return TrialSpec(
             road=cell.road, road_class=self.road_class, amplitudes=self.amplitudes,
             laplace_nu=self.laplace_nu, speed_kmh=cell.speed_kmh, duration_s=cell.duration_s,
@@ -135,7 +174,10 @@ class StudySettings:
         out["roads"] = list(self.roads)
         out["speeds_kmh"] = list(self.speeds_kmh)
         out["durations_s"] = list(self.durations_s)
-        out["vehicle"] = self.vehicle.to_dict()
+        out["vehicle"] = self.studied_vehicle.to_dict()
+        del out["full_vehicle"]
+        if self.model == "half":
+            del out["model"]
         out["pipeline"] = dataclasses.asdict(self.pipeline_config())
         return out
 
@@ -143,7 +185,10 @@ class StudySettings:
     def from_dict(cls, data: dict[str, Any]) -> StudySettings:
         values = {k: v for k, v in data.items() if k != "pipeline"}
         try:
-            values["vehicle"] = vehicle_from_mapping(values.get("vehicle", {}), source=MANIFEST)
+            if values.get("model", "half") == "full":
+                values["full_vehicle"] = full_vehicle_from_mapping(values.pop("vehicle", {}), source=MANIFEST)
+            else:
+                values["vehicle"] = vehicle_from_mapping(values.get("vehicle", {}), source=MANIFEST)
             for name in ("roads", "speeds_kmh", "durations_s"):
                 values[name] = tuple(values[name])
             return cls(**values)
@@ -151,9 +196,10 @@ class StudySettings:
             raise ConfigError(f"{MANIFEST}: not a study manifest this version can read ({exc})") from None
 
 
-def default_method() -> str:
-    """The study's default method: Rozyn's pipeline (``rozyn``), the thesis' subject."""
-    return "rozyn" if "rozyn" in METHODS else next(iter(METHODS))
+def default_method(model: str = "half") -> str:
+    """The study's default method: the half car's, Rozyn's pipeline (``rozyn``), the thesis'
+    subject; the full car's, ``likelihood`` (Rozyn's stage, then the likelihood refinement)."""
+    return MODELS[model].default_method
 
 
 def _without_refinement(cfg: PipelineConfig) -> PipelineConfig:

@@ -1,7 +1,8 @@
 """Running a study's trials: chunks of one cell, on local processes or a Dask cluster.
 
 Every (road, speed, measurement time, trial) is one seeded trial
-(:func:`rozyn_estimator.tools.trial.run_trial`). :func:`run_study` runs the missing ones in
+(:func:`rozyn_estimator.tools.trial.run_trial`; the full car's:
+:func:`rozyn_estimator.tools.trial_full.run_full_trial`). :func:`run_study` runs the missing ones in
 chunks (:class:`Chunk`) and appends each finished chunk to ``results.csv``. Each trial's
 seed depends on the settings, the cell and the trial number only, and each trial runs on
 one BLAS thread: the results are bit-identical whatever the number of workers.
@@ -26,6 +27,7 @@ from rozyn_estimator.tools.study.directory import load_manifest, new_manifest, w
 from rozyn_estimator.tools.study.results import ResultsWriter, TrialRow, sort_rows, write_results
 from rozyn_estimator.tools.study.settings import MANIFEST, RESULTS, Cell, StudySettings
 from rozyn_estimator.tools.trial import TrialSpec, limit_threads, run_trial
+from rozyn_estimator.tools.trial_full import FullTrialSpec, run_full_trial
 
 DEFAULT_CHUNK_TRIALS = 25
 
@@ -34,7 +36,7 @@ DEFAULT_CHUNK_TRIALS = 25
 class Chunk:
     """Trials of one cell, run as one task (amortises process and scheduler overhead)."""
 
-    spec: TrialSpec
+    spec: TrialSpec | FullTrialSpec
     cell: Cell
     trials: tuple[int, ...]
     seeds: tuple[int, ...]
@@ -55,7 +57,9 @@ def run_chunk(chunk: Chunk) -> list[TrialRow]:
 def _run_one(chunk: Chunk, trial: int, seed: int) -> TrialRow:
     """One trial; an exception becomes an ``error`` row so one bad road cannot stop a study."""
     try:
-        return TrialRow.from_result(chunk.cell, trial, run_trial(chunk.spec, seed))
+        spec = chunk.spec
+        result = run_full_trial(spec, seed) if isinstance(spec, FullTrialSpec) else run_trial(spec, seed)
+        return TrialRow.from_result(chunk.cell, trial, result)
     except Exception as exc:
         return TrialRow(chunk.cell, trial, seed, "error", None, None, f"{type(exc).__name__}: {exc}", "")
 
@@ -187,7 +191,7 @@ def run_study(
     rows = list(done)
     chunks = plan_chunks(settings, {r.key for r in rows}, options.chunk_trials)
     todo = sum(len(c.trials) for c in chunks)
-    writer = ResultsWriter(out_dir / RESULTS)
+    writer = ResultsWriter(out_dir / RESULTS, model=settings.car)
     bar = _progress(settings.n_trials, len(rows), options.progress)
     started = time.perf_counter()
     status = "interrupted"
@@ -209,7 +213,7 @@ def run_study(
                   f"continue with --resume --out {out_dir}", file=sys.stderr)
     rows = sort_rows(settings, rows)
     if todo:
-        write_results(out_dir / RESULTS, rows)
+        write_results(out_dir / RESULTS, rows, settings.car)
     return rows, report
 
 
