@@ -241,11 +241,6 @@ class EstimatorNode(Node):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    # One BLAS thread: the update's matrices are tiny, and a second BLAS thread spinning for a
-    # core that intake, the executor or a neighbouring process holds slows it by half.
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(1)
     return ros_common.spin_node(EstimatorNode, args)
 
 
