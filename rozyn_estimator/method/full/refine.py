@@ -20,8 +20,8 @@ mostly noise is refused.
 Covariance: the inverse Fisher information, mapped to the physical parameters, times the
 taper's variance factor ``mean(w⁴) / mean(w²)²`` (Dahlhaus 1988: a tapered periodogram's
 ordinates are fewer independent ones), the nuisances' uncertainty included (the inverse of
-the whole information), and half way to the score's time blocks' variance
-(:mod:`.blocks`: a road whose roughness changes along the way). What the vehicle's
+the whole information), and raised where the road is not stationary (:mod:`.blocks`: half
+way to the score's time blocks' variance, or by the road's intermittency, the larger). What the vehicle's
 tolerances add comes from :mod:`.refine_budget` (a warm update keeps the previous window's
 while its body parameters moved by less than 1 % (1 cm for the lateral CoG): the
 contributions are sensitivities of the model at θ).
@@ -39,7 +39,7 @@ import numpy as np
 from scipy.optimize import OptimizeResult, minimize
 from scipy.signal import windows
 
-from rozyn_estimator.method.full.blocks import block_factors
+from rozyn_estimator.method.full.blocks import variance_factors
 from rozyn_estimator.method.full.refine_budget import refinement_contributions
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.full.whittle import FullWhittle, ridged
@@ -74,7 +74,7 @@ class FullRefinement:
     coherence_scale: float = 1.0  # the tracks' fitted separation over the front track
     contributions: dict[str, np.ndarray] = field(default_factory=dict)  # assumed value -> (5,) per 1 u
     budget_theta: np.ndarray | None = None  # the body parameters θ[:5] the contributions were taken at
-    variance_factors: tuple[float, ...] = ()  # the time blocks' factors on the model's variances
+    variance_factors: tuple[float, ...] = ()  # the non-stationary road's factors on the model's variances
     elapsed_ms: float = 0.0
     notes: tuple[str, ...] = ()
 
@@ -199,7 +199,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     cov = _taper_factor(y.shape[0], cfg.taper) * jac @ theta_cov @ jac.T
     if not (np.all(np.isfinite(cov)) and np.all(np.diag(cov) > 0)):
         raise _FitError("likelihood fit: covariance not positive")
-    factors = block_factors(objective, theta, jac @ theta_cov, cov, spectra, y, cfg)
+    factors = variance_factors(objective, theta, jac @ theta_cov, cov, spectra, y, share, cfg)
     cov = np.sqrt(factors)[:, None] * cov * np.sqrt(factors)[None, :]
     contributions, budget_theta = _contributions(objective, theta, theta_cov, vehicle, warm)
     converged = objective.decrement(theta) < cfg.tol
