@@ -21,9 +21,16 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 from test_replay import CONFIG, _stream, _write
 
+from rozyn_estimator.method.full import FULL_PARAM_NAMES
 from rozyn_estimator.tools import cli, replay_plot
 from rozyn_estimator.tools.replay import replay
-from rozyn_estimator.tools.replay_fleet import CSV_COLUMNS, FLEET_CSV
+from rozyn_estimator.tools.replay_fleet import (
+    CSV_COLUMNS,
+    FLEET_CSV,
+    FULL_CSV_COLUMNS,
+    FleetRow,
+    format_table,
+)
 
 BIN = Path(sys.executable).parent
 
@@ -50,10 +57,10 @@ def fleet(tmp_path_factory):
     return root
 
 
-def _rows(out: Path) -> dict[str, dict[str, str]]:
+def _rows(out: Path, columns: tuple[str, ...] = CSV_COLUMNS) -> dict[str, dict[str, str]]:
     with (out / FLEET_CSV).open() as f:
         rows = list(csv.DictReader(f))
-    assert tuple(rows[0]) == CSV_COLUMNS
+    assert tuple(rows[0]) == columns
     return {Path(r["out_dir"]).name: r for r in rows}
 
 
@@ -152,7 +159,8 @@ def test_plot_asked_for_without_matplotlib_is_one_clear_error(fleet, tmp_path, c
 
 
 def test_fleet_replay_of_the_shipped_samples_with_a_truncated_copy(tmp_path):
-    """README's example: the sample bags and a truncated one -> a table, a plot each, status 1."""
+    """README's example: the sample bags and a truncated one -> a table, a plot each, status 1;
+    the full car's sample shows its five parameters, the half car's rows their three."""
     root = Path(__file__).resolve().parents[1] / "bags" / "samples"
     broken = tmp_path / "broken"
     shutil.copytree(root / "iso-a-100kmh", broken)
@@ -162,8 +170,51 @@ def test_fleet_replay_of_the_shipped_samples_with_a_truncated_copy(tmp_path):
                            "--method", "rozyn", "--no-bag", "--out", str(tmp_path / "out")],
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
-    rows = _rows(tmp_path / "out")
-    samples = ("iso-a-100kmh", "laplace-nu1-100kmh")
-    assert [rows[n]["status"] for n in (*samples, "broken")] == ["ok", "ok", "failed"]
+    rows = _rows(tmp_path / "out", FULL_CSV_COLUMNS)  # a full-car bag among them
+    samples = ("full-iso-a-100kmh", "iso-a-100kmh", "laplace-nu1-100kmh")
+    assert [rows[n]["status"] for n in (*samples, "broken")] == ["ok", "ok", "ok", "failed"]
     assert all((tmp_path / "out" / n / "estimates.png").is_file() for n in samples)
     assert "broken" in done.stdout and "iso-a-100kmh" in done.stdout
+    with (tmp_path / "out" / "full-iso-a-100kmh" / "updates.csv").open() as f:
+        last = [r for r in csv.DictReader(f) if r["published"] == "1"][-1]
+    full = rows["full-iso-a-100kmh"]
+    for name in FULL_PARAM_NAMES:  # the last published estimate and its std
+        assert float(full[name]) == float(last[name])
+        assert float(full[f"{name}_std"]) == float(last[f"{name}_std"])
+    assert (full["truth_roll_inertia_kgm2"], full["truth_cog_lateral_m"]) == ("400.0", "0.0")
+    for name in ("iso-a-100kmh", "broken"):  # a half car's row: no roll inertia, no lateral CoG
+        assert {rows[name][k] for k in FULL_CSV_COLUMNS if "roll" in k or "lateral" in k} == {""}
+    table = done.stdout.splitlines()
+    assert table[0].endswith("l_f [m]      I_xx [kg m²]           y_c [m]  status      warnings")
+    (line,) = [t for t in table if t.startswith("full-iso-a-100kmh ")]
+    assert f"{float(full['roll_inertia_kgm2']):.1f} ± {float(full['roll_inertia_kgm2_std']):.1f}" in line
+    assert f"{float(full['cog_lateral_m']):.4f} ± {float(full['cog_lateral_m_std']):.4f}" in line
+    (line,) = [t for t in table if t.startswith("iso-a-100kmh ")]
+    assert f"{float(rows['iso-a-100kmh']['cog_from_front_axle_m']):.4f} ± " in line
+    assert " –                 –  ok " in line + " "  # no roll inertia, no lateral CoG
+
+
+def test_a_half_car_fleets_table_is_as_before_and_a_full_car_adds_two_columns():
+    half = FleetRow("/bags/drive", "ok", duration_s=60.0, estimate=(1001.25, 1998.5, 1.20125),
+                    std=(10.0, 20.0, 0.0125), warnings="2 window resets")
+    failed = FleetRow("/bags/broken", "failed", error="/bags/broken: damaged")
+    assert format_table([half, failed]).splitlines() == [  # as before the full car
+        "bag                           duration            m [kg]      I_yy [kg m²]           l_f [m]  "
+        "status      warnings",
+        "-" * 114,
+        "drive                            60.0s     1001.2 ± 10.0     1998.5 ± 20.0   1.2012 ± 0.0125  "
+        "ok          2 window resets",
+        "broken                               –                 –                 –                 –  "
+        "failed      broken: damaged",
+    ]
+    full = FleetRow("/bags/suv", "ok", model="full", duration_s=90.0,
+                    estimate=(1800.0, 3200.0, 1.55, 650.0, 0.03), std=(1.0, 2.0, 0.001, 3.0, 0.002))
+    assert format_table([half, full]).splitlines() == [
+        "bag                           duration            m [kg]      I_yy [kg m²]           l_f [m]      "
+        "I_xx [kg m²]           y_c [m]  status      warnings",
+        "-" * 150,
+        "drive                            60.0s     1001.2 ± 10.0     1998.5 ± 20.0   1.2012 ± 0.0125      "
+        "           –                 –  ok          2 window resets",
+        "suv                              90.0s      1800.0 ± 1.0      3200.0 ± 2.0   1.5500 ± 0.0010      "
+        " 650.0 ± 3.0   0.0300 ± 0.0020  ok          ",
+    ]

@@ -6,7 +6,9 @@ Each bag is replayed exactly as ``rozyn replay BAG`` does it
 (:func:`~rozyn_estimator.tools.trial.parallel_map`) or on the workers of a Dask cluster
 (``--scheduler``, as ``rozyn study``: :func:`~rozyn_estimator.tools.study.work.connect_scheduler`).
 One progress bar counts the bags; then one table (per bag: duration, last estimate ± std,
-status, warnings) and ``<out>/fleet.csv`` with the same and more.
+status, warnings) and ``<out>/fleet.csv`` with the same and more. A full-car bag shows its
+roll inertia and lateral CoG too: the table and ``fleet.csv`` gain their columns when the
+fleet holds one (a half-car fleet's are as they were; a half-car row leaves them empty).
 
 A bag that cannot be replayed (damaged, truncated, foreign, no accelerometer topic, no
 update due) is a ``failed`` row saying why; it never stops the others. The exit status
@@ -33,6 +35,7 @@ from rozyn_estimator.tools.replay_outputs import ReplayResult, published_estimat
 FLEET_CSV = "fleet.csv"
 STATUSES = ("ok", "no estimate", "failed")  # an estimate published / none published / not replayed
 PARAMS = ("mass_kg", "pitch_inertia_kgm2", "cog_from_front_axle_m")
+FULL_PARAMS = (*PARAMS, "roll_inertia_kgm2", "cog_lateral_m")  # a full car's, the half car's first
 
 
 @dataclass(frozen=True)
@@ -48,21 +51,22 @@ class FleetTask:
 class FleetRow:
     """What one bag gave: a row of the table and of ``fleet.csv``.
 
-    Estimates, their std and the truth are in (m [kg], I_yy [kg m²], l_f [m]) order (a full
-    car's too: its bag's ``updates.csv`` has its roll inertia and lateral CoG); ``warnings``
-    sums up what went wrong short of failing, ``error`` why a bag failed.
+    Estimates, their std and the truth are in :data:`PARAMS` order (m [kg], I_yy [kg m²],
+    l_f [m]); a full car's in :data:`FULL_PARAMS` order (then I_xx [kg m²], y_c [m]).
+    ``warnings`` sums up what went wrong short of failing, ``error`` why a bag failed.
     """
 
     bag: str
     status: str
+    model: str = "half"  # the replayed estimator's: half or full
     duration_s: float | None = None
     updates: int = 0
     published: int = 0
     failed_updates: int = 0
     warned_updates: int = 0
-    estimate: tuple[float, float, float] | None = None
-    std: tuple[float, float, float] | None = None
-    truth: tuple[float, float, float] | None = None
+    estimate: tuple[float, ...] | None = None
+    std: tuple[float, ...] | None = None
+    truth: tuple[float, ...] | None = None
     warnings: str = ""
     error: str = ""
     out_dir: str = ""
@@ -88,14 +92,15 @@ class FleetRow:
         return cls(
             bag=str(bag),
             status="ok" if published else ("no estimate" if updates else "failed"),
+            model=result.config.model,
             duration_s=result.duration_s,
             updates=len(updates),
             published=len(published),
             failed_updates=failed,
             warned_updates=warned,
-            estimate=_triple(last.params) if last is not None and last.params is not None else None,
-            std=_triple(last.std) if last is not None and last.std is not None else None,
-            truth=_triple(result.truth) if result.truth is not None else None,
+            estimate=_ordered(last.params) if last is not None and last.params is not None else None,
+            std=_ordered(last.std) if last is not None and last.std is not None else None,
+            truth=_ordered(result.truth) if result.truth is not None else None,
             warnings="; ".join(notes),
             error="" if updates else f"no update fell due ({result.accel_messages} accelerometer messages)",
             out_dir=str(result.out_dir or ""),
@@ -104,11 +109,11 @@ class FleetRow:
         )
 
 
-def _triple(values: Any) -> tuple[float, float, float]:
-    """(m, I_yy, l_f) of the half car's three values or the full car's five."""
-    picked = list(values) if len(values) == 3 else [values[0], values[2], values[3]]
-    a, b, c = (float(v) for v in picked)
-    return a, b, c
+def _ordered(values: Any) -> tuple[float, ...]:
+    """The half car's three values as they are, the full car's five (m, I_xx, I_yy, l_f, y_c)
+    in :data:`FULL_PARAMS` order (m, I_yy, l_f, I_xx, y_c)."""
+    picked = list(values) if len(values) == 3 else [values[0], values[2], values[3], values[1], values[4]]
+    return tuple(float(v) for v in picked)
 
 
 def is_bag(path: Path) -> bool:
@@ -236,23 +241,35 @@ def _dask_rows(tasks: Sequence[FleetTask], address: str, progress: bool) -> list
     return [rows[i] for i in range(len(tasks))]
 
 
-CSV_COLUMNS = (
-    "bag", "status", "duration_s", "updates", "published", "failed_updates", "warned_updates",
-    *PARAMS, *(f"{p}_std" for p in PARAMS), *(f"truth_{p}" for p in PARAMS),
-    "warnings", "error", "out_dir", "plot", "wall_s",
-)
+def csv_columns(params: Sequence[str]) -> tuple[str, ...]:
+    """The header of ``fleet.csv`` for ``params`` (:data:`PARAMS` or :data:`FULL_PARAMS`)."""
+    return ("bag", "status", "duration_s", "updates", "published", "failed_updates", "warned_updates",
+            *params, *(f"{p}_std" for p in params), *(f"truth_{p}" for p in params),
+            "warnings", "error", "out_dir", "plot", "wall_s")
+
+
+CSV_COLUMNS = csv_columns(PARAMS)  # a fleet of half-car bags
+FULL_CSV_COLUMNS = csv_columns(FULL_PARAMS)  # a fleet with a full-car bag
+
+
+def _params(rows: Sequence[FleetRow]) -> tuple[str, ...]:
+    """The parameters a fleet shows: the full car's five when it holds a full-car bag."""
+    return FULL_PARAMS if any(r.model == "full" for r in rows) else PARAMS
 
 
 def write_fleet_csv(path: Path, rows: Sequence[FleetRow]) -> None:
-    """``fleet.csv``: :data:`CSV_COLUMNS`, one row per bag (numbers at full precision)."""
+    """``fleet.csv``: :data:`CSV_COLUMNS` (:data:`FULL_CSV_COLUMNS` with a full-car bag), one
+    row per bag (numbers at full precision; a half-car row has no roll inertia, no lateral CoG)."""
+    params = _params(rows)
     with path.open("w", newline="") as f:
-        writer = csv.DictWriter(f, CSV_COLUMNS)
+        writer = csv.DictWriter(f, csv_columns(params))
         writer.writeheader()
         for row in rows:
-            cells = {k: v for k, v in asdict(row).items() if k not in ("estimate", "std", "truth")}
+            cells = {k: v for k, v in asdict(row).items() if k not in ("model", "estimate", "std", "truth")}
             for key, prefix, suffix in (("estimate", "", ""), ("std", "", "_std"), ("truth", "truth_", "")):
-                values = getattr(row, key)
-                cells |= {f"{prefix}{p}{suffix}": values[i] if values else None for i, p in enumerate(PARAMS)}
+                values = getattr(row, key) or ()
+                cells |= {f"{prefix}{p}{suffix}": values[i] if i < len(values) else None
+                          for i, p in enumerate(params)}
             writer.writerow({k: _cell(v) for k, v in cells.items()})
 
 
@@ -260,24 +277,29 @@ def _cell(v: Any) -> Any:
     return repr(float(v)) if isinstance(v, float) else ("" if v is None else v)
 
 
-DIGITS = (1, 1, 4)  # decimals of m, I_yy, l_f in the table
+# per parameter of FULL_PARAMS: the table's heading, width and decimals
+_TABLE = (("m [kg]", 16, 1), ("I_yy [kg m²]", 17, 1), ("l_f [m]", 17, 4), ("I_xx [kg m²]", 17, 1),
+          ("y_c [m]", 17, 4))
 
 
 def format_table(rows: Sequence[FleetRow], width: int = 70) -> str:
-    """The summary table: bag, duration, last estimate ± std, status, warnings (or the error)."""
-    head = (f"{'bag':<28} {'duration':>9}  {'m [kg]':>16} {'I_yy [kg m²]':>17} {'l_f [m]':>17}  "
-            f"{'status':<11} warnings")
+    """The summary table: bag, duration, last estimate ± std, status, warnings (or the error);
+    with a full-car bag, its roll inertia and lateral CoG too ("–" in a half car's row)."""
+    columns = _TABLE[: len(_params(rows))]
+    head = (f"{'bag':<28} {'duration':>9}  " + " ".join(f"{h:>{w}}" for h, w, _ in columns)
+            + f"  {'status':<11} warnings")
     lines = [head, "-" * len(head)]
     for r in rows:
         name = Path(r.bag).name or r.bag
         name = name if len(name) <= 28 else "…" + name[-27:]
         duration = f"{r.duration_s:8.1f}s" if r.duration_s is not None else f"{'–':>9}"
-        cells = ["–"] * 3
-        if r.estimate is not None:
-            std = r.std or (float("nan"),) * 3
-            cells = [f"{v:.{d}f} ± {s:.{d}f}" for v, s, d in zip(r.estimate, std, DIGITS, strict=True)]
+        values = r.estimate or ()
+        std = r.std or (float("nan"),) * len(values)
+        cells = []
+        for k, (_, w, d) in enumerate(columns):
+            text = f"{values[k]:.{d}f} ± {std[k]:.{d}f}" if k < len(values) else "–"
+            cells.append(f"{text:>{w}}")
         note = r.error.replace(r.bag, Path(r.bag).name) if r.status == "failed" else r.warnings
         note = note if len(note) <= width else note[: width - 1] + "…"
-        lines.append(f"{name:<28} {duration}  {cells[0]:>16} {cells[1]:>17} {cells[2]:>17}  "
-                     f"{r.status:<11} {note}")
+        lines.append(f"{name:<28} {duration}  {' '.join(cells)}  {r.status:<11} {note}")
     return "\n".join(lines)
