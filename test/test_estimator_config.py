@@ -32,6 +32,19 @@ def test_from_parameters_by_ros_name():
     assert config.vehicle.wheelbase_m == 3.0
 
 
+@pytest.mark.parametrize(("values", "hardware_id"), [
+    ({}, "half_car"),
+    ({"vehicle.model": "full"}, "full_car"),
+    ({"vehicle_file": "config/vehicle_full.yaml"}, "full_car"),
+    ({"vehicle.model": "full", "hardware_id": "rig_7"}, "rig_7"),  # an explicit value wins
+    ({"hardware_id": "half_car", "vehicle.model": "full"}, "half_car"),
+])
+def test_the_diagnostics_hardware_id_follows_the_model_unless_set(values, hardware_id):
+    config = EstimatorConfig.from_parameters(values)
+    assert config.diagnostic_hardware_id == hardware_id
+    assert EstimatorConfig.from_json(config.to_json()).diagnostic_hardware_id == hardware_id  # replayed
+
+
 def test_the_vehicle_file_overrides_the_vehicle_parameters(tmp_path):
     path = tmp_path / "car.yaml"
     path.write_text(dump_vehicle(Vehicle(sprung_mass_kg=1500.0)))

@@ -121,8 +121,28 @@ def test_sim_and_estimator_of_the_full_car(ros, unused):
     assert {f"samples_{c}" for c in corners} <= set(values) and f"samples_{unused}" not in values
     assert values["dropped_total"] == "0" and values["window_resets"] == "0", values
     assert float(values["roll_inertia_kgm2_std"]) == pytest.approx(math.sqrt(c[1, 1]), rel=1e-3)
+    assert {s.hardware_id for s in statuses} == {"full_car"}  # the model's, hardware_id not set
     sim_status = [s for a in got["diagnostics"] for s in a.status if s.name == "/sim_node"]
     assert sim_status and sim_status[-1].hardware_id == "full_car_sim"
+
+
+@pytest.mark.parametrize(("overrides", "hardware_id"), [
+    ([Parameter("vehicle.model", value="full")], "full_car"),
+    ([Parameter("vehicle_file", value=FULL_FILE), Parameter("hardware_id", value="rig_7")], "rig_7"),
+    ([], "half_car"),
+], ids=["full car", "set explicitly", "half car"])
+def test_the_estimators_hardware_id_follows_the_model_unless_set(ros, overrides, hardware_id):
+    """Before any update: the periodic /diagnostics status of the estimator names its hardware."""
+    got: list[DiagnosticArray] = []
+    ros.probe.create_subscription(DiagnosticArray, "/diagnostics", got.append, 50)
+    ros.add(EstimatorNode(context=ros.context, parameter_overrides=[
+        *overrides, Parameter("diagnostics_period_s", value=0.1)]))
+
+    def statuses() -> list:
+        return [s for a in got for s in a.status if s.name == "/estimator_node"]
+
+    assert ros.spin_until(lambda: len(statuses()) >= 2, 10.0)
+    assert {s.hardware_id for s in statuses()} == {hardware_id}
 
 
 def test_invalid_full_car_parameters_are_refused_at_startup(ros, capsys):

@@ -66,7 +66,8 @@ class EstimatorConfig:
     frame_id: str = param("base_link", "frame of the published centre of gravity")
     front_axle_x_m: float = param(0.0, "x of the front axle in frame_id (com.x = front_axle_x_m - lf)",
                                   unit="m", low=-100.0, high=100.0)
-    hardware_id: str = param("half_car", "hardware_id of the diagnostic status")
+    hardware_id: str = param("", "hardware_id of the diagnostic status; empty: the model's, half_car or "
+                             "full_car")
     node_name: str = param("/estimator_node", "name of the diagnostic status", ros_name="")
     full_vehicle: FullVehicle | None = None  # the full car (vehicle.model full or a full-car vehicle_file)
 
@@ -86,6 +87,12 @@ class EstimatorConfig:
     def model(self) -> str:
         """``half`` or ``full``."""
         return "half" if self.full_vehicle is None else "full"
+
+    @property
+    def diagnostic_hardware_id(self) -> str:
+        """The diagnostic status' hardware_id: the parameter when set, else the model's
+        (``half_car`` or ``full_car``)."""
+        return self.hardware_id or f"{self.model}_car"
 
     @property
     def model_vehicle(self) -> Vehicle | FullVehicle:

@@ -208,8 +208,9 @@ class EstimatorNode(Node):
         health = self.online.report(silent_s=[wall - arrival for arrival in self._arrival])
         values = {**health.values, "updates_skipped": str(self.updates_skipped)}
         health = Health(health.level, health.message, values)
+        hardware_id = self.config.diagnostic_hardware_id
         self.pub_diagnostics.publish(
-            ros_io.diagnostic_array(health, self.get_fully_qualified_name(), self.config.hardware_id, now)
+            ros_io.diagnostic_array(health, self.get_fully_qualified_name(), hardware_id, now)
         )
 
     def finish(self, executor: Any = None) -> int:

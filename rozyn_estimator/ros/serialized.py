@@ -37,7 +37,7 @@ def update_messages(update: Update, health: Health, config: EstimatorConfig) -> 
         if update.covariance is not None:
             out.append(("/inertia/covariance", serialize_message(ros_io.covariance_msg(update))))
     diag = ros_io.diagnostic_array(
-        health, absolute_topic(config.node_name), config.hardware_id, update.stamp_ns
+        health, absolute_topic(config.node_name), config.diagnostic_hardware_id, update.stamp_ns
     )
     out.append(("/diagnostics", serialize_message(diag)))
     return out
