@@ -58,7 +58,7 @@ def _factors(kind: str, seed: int) -> np.ndarray:
     sim = SimConfig(model="full", full_vehicle=EXACT, road=RoadSpec(kind=kind, amplitudes="gaussian"),
                     speed_kmh=100.0, seed=seed)
     y = Simulation(sim).run(120.0).accel_mps2
-    y = y + np.random.default_rng([seed, 3]).standard_normal(y.shape) * 0.1 * y.std(axis=0)
+    y = y + np.random.default_rng([seed, 4]).standard_normal(y.shape) * 0.1 * y.std(axis=0)
     start = estimate_full(y, 100.0, EXACT, METHODS["rozyn"], 100 / 3.6).params
     ref = refine_full(y, 100.0, EXACT, (0, 1, 2, 3), start, 100 / 3.6, LikelihoodConfig(block_weight=0.0))
     assert ref.ok, ref.reason

@@ -53,3 +53,24 @@ def test_the_table_names_the_five_parameters(capsys):
     out = capsys.readouterr().out
     for label in ("roll inertia", "pitch inertia", "CoG left of centre", "failures: 0 of 2"):
         assert label in out
+
+
+def test_the_sensor_noise_is_not_a_copy_of_the_right_tracks_random_part():
+    """The noise has its own stream: on the right track's (3) it repeated the same normal
+    draws as the track's independent part, noise correlated with the road."""
+    import dataclasses
+
+    from rozyn_estimator.tools.trial_full import FullTrialSpec, simulate_full
+    from rozyn_estimator.vehicle_full import FullVehicle
+    from sim_node.road import RoadSpec
+    from sim_node.simulation import SimConfig
+
+    sim = SimConfig(model="full", full_vehicle=FullVehicle(), road=RoadSpec(amplitudes="gaussian"),
+                    duration_s=10.0, seed=3)
+    clean, *_ = simulate_full(FullTrialSpec(sim=sim), 3)
+    noisy, *_ = simulate_full(dataclasses.replace(FullTrialSpec(sim=sim), noise_fraction=0.1), 3)
+    noise = ((noisy - clean) / (0.1 * clean.std(axis=0))).ravel()
+    for stream in range(4):  # the road's, the simulator's and the right track's streams
+        draws = np.random.default_rng([3, stream]).standard_normal(noise.size)
+        assert abs(np.corrcoef(noise, draws)[0, 1]) < 0.05, stream
+    assert abs(noise.std() - 1.0) < 0.05

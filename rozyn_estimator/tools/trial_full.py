@@ -30,6 +30,7 @@ from sim_node.simulation import SimConfig, Simulation
 LABELS = ("mass [kg]", "roll inertia [kg m^2]", "pitch inertia [kg m^2]", "CoG from front axle [m]",
           "CoG left of centre [m]")
 METHODS_FULL = ("likelihood", "rozyn")
+NOISE_STREAM = 4  # the sensor noise's random stream per seed (the simulator's are 0-3)
 _METHOD_LABELS = {"likelihood": "Rozyn's pipeline and the likelihood refinement", "rozyn": "Rozyn's pipeline"}
 
 
@@ -93,7 +94,9 @@ def simulate_full(spec: FullTrialSpec, seed: int) -> tuple[np.ndarray, np.ndarra
     accel = block.accel_mps2
     if spec.noise_fraction > 0:
         rms = accel.std(axis=0)
-        noise = np.random.default_rng([seed, 3]).standard_normal(accel.shape)
+        # its own stream: the road's are 0 and 1, the simulator's noise 2, the right track's 3 (that
+        # one made the noise a copy of the right track's independent part)
+        noise = np.random.default_rng([seed, NOISE_STREAM]).standard_normal(accel.shape)
         accel = accel + noise * (spec.noise_fraction * rms)
     return accel, block.speed_mps, tuple(block.channels), (time.perf_counter() - started) * 1e3
 
