@@ -27,7 +27,7 @@ from scipy.signal import windows
 
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
-from rozyn_estimator.method.likelihood.objective import WhittleObjective, inv2, mul2
+from rozyn_estimator.method.likelihood.objective import WhittleObjective
 
 NOISE_AT_ZERO = 1e-5  # a noise floor below this share of its channel's band power is zero
 _INCOHERENCE_AT_ZERO = 1e-6
@@ -205,9 +205,7 @@ def _score_series(objective: WhittleObjective, theta: np.ndarray, combos: np.nda
     n, fs, d = spectra.n_samples, spectra.fs_hz, spectra.dft
     if d is None:
         raise ValueError("the score's time series needs the window's DFT (Spectra.dft)")
-    S, dS = objective.model_at(theta)
-    inv = inv2(S)[0]
-    A = mul2(mul2(inv, np.tensordot(combos, dS, axes=1)), inv)  # (q, k, 2, 2)
+    A = objective.score_weights(theta, combos)  # (q, k, 2, 2)
     k0, k = spectra.first_bin, d.shape[0]
     full = np.zeros((1 + combos.shape[0], n // 2 + 1, 2), dtype=complex)  # ỹ and the filtered ẽ
     full[0, k0: k0 + k] = d

@@ -1,5 +1,7 @@
-"""Where the half car's spectrum is evaluated: :class:`Reduction`, a coarse evaluation grid
-and the sparse linear map from it to the periodograms' expectations at the band's bins.
+"""Where the half car's spectrum is evaluated: :class:`Grid`, a coarse evaluation grid's
+frequencies, and :class:`Reduction`, the sparse linear map from it to the periodograms'
+expectations at the band's bins. Both depend on the window's length and rate only, and are
+cached: consecutive windows of the same length share them.
 
 Why. The model's cost is per frequency, and a 120 s window has 1 741 Fourier bins in the
 band — but the spectral matrix is smooth on their scale: a body resonance spans ~60 bins,
@@ -26,6 +28,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
+from numpy.polynomial import legendre
 from scipy import sparse
 
 
@@ -64,6 +67,64 @@ def map_bins(op: sparse.csr_array, m: np.ndarray) -> np.ndarray:
     flat = moved.reshape(moved.shape[0], -1)
     out = (op @ flat.view(float)).view(complex) if np.iscomplexobj(flat) else op @ flat
     return np.moveaxis(out.reshape(op.shape[0], *moved.shape[1:]), 0, -3)
+
+
+@dataclass(frozen=True)
+class Grid:
+    """The frequencies the model is evaluated at: every ``step``-th bin of the band's bins
+    extended by ``half`` bins each side (the taper's smoothing reaches that far, above 0 Hz),
+    with their aliases ``f + a fs``, ``a = -A..A`` (read-only arrays: shared by the cache)."""
+
+    kernel: np.ndarray  # (2 half + 1,) the taper's spectral window, trimmed to the extension, sums to 1
+    half: int  # J: bins the grid extends beyond the band on each side
+    n_eval: int  # nodes of the evaluation grid
+    omega: np.ndarray  # (A n_eval,) signed angular frequency of each node and alias [rad/s]
+    log_shape: np.ndarray  # (A n_eval,) log(|f| / f_ref): the road shape is exp((2 - w) log_shape + ...)
+    shape_basis: np.ndarray  # (terms, A n_eval) Legendre polynomials of degree 2.. in log frequency
+
+
+def evaluation_grid(freq_hz: np.ndarray, fs_hz: float, aliases: int, f_ref_hz: float,
+                    window_weights: np.ndarray | None, step: int, road_shape_terms: int,
+                    shape_edges_hz: tuple[float, float] | None) -> Grid:
+    """The :class:`Grid` of a band's bins ``freq_hz`` (cached by all that defines it)."""
+    weights = None if window_weights is None else np.asarray(window_weights, dtype=float).tobytes()
+    edges = None if shape_edges_hz is None else (float(shape_edges_hz[0]), float(shape_edges_hz[1]))
+    return _grid(np.asarray(freq_hz, dtype=float).tobytes(), float(fs_hz), int(aliases), float(f_ref_hz),
+                 weights, int(step), int(road_shape_terms), edges)
+
+
+@lru_cache(maxsize=16)
+def _grid(freq_bytes: bytes, fs_hz: float, aliases: int, f_ref_hz: float, weights: bytes | None, step: int,
+          road_shape_terms: int, shape_edges_hz: tuple[float, float] | None) -> Grid:
+    freq_hz = np.frombuffer(freq_bytes)
+    # A tapered periodogram's expectation is S smoothed by the taper's spectral window: the model
+    # runs on the grid extended by J Fourier bins each side (above 0 Hz)
+    c = np.ones(1) if weights is None else np.frombuffer(weights)
+    half = (c.size - 1) // 2
+    df = freq_hz[1] - freq_hz[0] if freq_hz.size > 1 else 1.0
+    room = max(0, math.ceil(freq_hz[0] / df) - 1)
+    if half > room:
+        c = c[half - room: half + room + 1]
+        half = room
+    n_ext = freq_hz.size + 2 * half
+    nodes = step * np.arange(node_count(n_ext, step))  # every step-th bin of the extended grid
+    grid = freq_hz[0] + df * (nodes - half) if half or step > 1 else freq_hz
+    shifts = np.arange(-aliases, aliases + 1)[:, None] * fs_hz
+    f = (grid[None, :] + shifts).ravel()  # (A n_eval,) signed
+    log_shape = np.log(np.abs(f) / f_ref_hz)
+    # Legendre polynomials of degree 2.. in log frequency across the band (held at their edge
+    # values at the aliases; continued smoothly over the few bins the grid extends beyond the
+    # band, which the interpolation from a coarse grid needs): the road's departure from a power law.
+    edges = np.log(np.array(shape_edges_hz or (freq_hz.min(), freq_hz.max())) / f_ref_hz)
+    x = (2.0 * log_shape - edges.sum()) / (edges[1] - edges[0])
+    aliased = np.repeat(np.arange(-aliases, aliases + 1) != 0, grid.size)
+    x[aliased] = np.clip(x[aliased], -1.0, 1.0)
+    degrees = range(2, road_shape_terms + 2)
+    basis = np.array([legendre.legval(x, np.eye(road_shape_terms + 2)[d]) for d in degrees])
+    out = Grid(c / c.sum(), half, nodes.size, 2.0 * np.pi * f, log_shape, basis)
+    for a in (out.kernel, out.omega, out.log_shape, out.shape_basis):
+        a.flags.writeable = False
+    return out
 
 
 def node_count(n_ext: int, step: int) -> int:

@@ -40,11 +40,10 @@ from collections.abc import Sequence
 from typing import Any, Literal, overload
 
 import numpy as np
-from numpy.polynomial import legendre
 from scipy import special
 
 from rozyn_estimator.method.likelihood.corners import CORNERS, CornerState, corner_outer, sensor_dg
-from rozyn_estimator.method.likelihood.grid import Reduction, node_count, reduction
+from rozyn_estimator.method.likelihood.grid import Reduction, evaluation_grid, reduction
 from rozyn_estimator.method.likelihood.road_input import delay_characteristic
 from rozyn_estimator.vehicle import Vehicle
 
@@ -99,39 +98,15 @@ class HalfCarSpectrum:
             shape_edges_hz=shape_edges_hz, corner_terms=corner_terms, sensor_positions=sensor_positions,
             grid_step=grid_step,
         )
-        # A tapered periodogram's expectation is S smoothed by the taper's spectral window: the model
-        # runs on the grid extended by J Fourier bins each side (above 0 Hz)
-        c = np.ones(1) if window_weights is None else np.asarray(window_weights, dtype=float)
-        half = (c.size - 1) // 2
-        df = freq_hz[1] - freq_hz[0] if freq_hz.size > 1 else 1.0
-        room = max(0, math.ceil(freq_hz[0] / df) - 1)
-        if half > room:
-            c = c[half - room: half + room + 1]
-            half = room
-        self.kernel = c / c.sum()
-        self.half, self.n_ext, self.n_freq = half, freq_hz.size + 2 * half, freq_hz.size
-        # the grid the model is evaluated on: every grid_step-th bin of the extended grid
+        # the grid the model is evaluated on (cached: consecutive windows and the model's variants share it)
+        at = evaluation_grid(freq_hz, fs_hz, aliases, f_ref_hz, window_weights, grid_step, road_shape_terms,
+                             shape_edges_hz)
+        self.kernel, self.half, self.n_eval = at.kernel, at.half, at.n_eval
+        self.n_ext, self.n_freq, self.n_alias = freq_hz.size + 2 * self.half, freq_hz.size, 2 * aliases + 1
+        self.omega, self.log_shape, self.shape_basis = at.omega, at.log_shape, at.shape_basis
         self.grid_step = grid_step
         self._reduction: Reduction | None = None  # the sparse map to the bins: built when first used
         self._fine: HalfCarSpectrum | None = None  # the model at every bin (fine_spectrum)
-        nodes = grid_step * np.arange(node_count(self.n_ext, grid_step))
-        self.n_eval = nodes.size
-        grid = freq_hz[0] + df * (nodes - half) if half or grid_step > 1 else freq_hz
-        shifts = np.arange(-aliases, aliases + 1)[:, None] * fs_hz
-        f = (grid[None, :] + shifts).ravel()  # (A n_eval,) signed
-        self.n_alias = 2 * aliases + 1
-        self.omega = 2.0 * np.pi * f
-        self.log_shape = np.log(np.abs(f) / f_ref_hz)  # road shape r = exp((2 - w) log_shape + ...)
-        # Legendre polynomials of degree 2.. in log frequency across the band (held at
-        # their edge values at the aliases; continued smoothly over the few bins the grid
-        # extends beyond the band, which the interpolation from a coarse grid needs): the
-        # road's departure from a power law.
-        edges = np.log(np.array(shape_edges_hz or (freq_hz.min(), freq_hz.max())) / f_ref_hz)
-        x = (2.0 * self.log_shape - edges.sum()) / (edges[1] - edges[0])
-        aliased = np.repeat(np.arange(-aliases, aliases + 1) != 0, grid.size)
-        x[aliased] = np.clip(x[aliased], -1.0, 1.0)
-        self.shape_basis = np.array([legendre.legval(x, np.eye(road_shape_terms + 2)[d])
-                                     for d in range(2, road_shape_terms + 2)])
         self.speed_mps = speed_mps
         self.rear_factor: np.ndarray | None = None  # assumed rear gain and delay (None: ideal)
         self.set_vehicle(vehicle)

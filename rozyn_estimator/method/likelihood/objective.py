@@ -152,6 +152,7 @@ class WhittleObjective:
         self._fisher: np.ndarray | None = None
         self._hess: np.ndarray | None = None
         self._rows: np.ndarray | None = None
+        self._weights: tuple[bytes, np.ndarray] | None = None  # (θ and combos, score_weights there)
         # The fit's iterations (``fast``): derivatives at the evaluation grid's nodes, the
         # gradient exact through the map's adjoint, the Fisher information from the bins at
         # the centre of every ``step`` (the midpoint rule, each weighted by the bins it
@@ -340,6 +341,17 @@ class WhittleObjective:
         h = np.array([(self.jac(theta + step * e) - g0) / step for e in np.eye(theta.size)]).T
         return 0.5 * (h + h.T)
 
+    def score_weights(self, theta: np.ndarray, combos: np.ndarray) -> np.ndarray:
+        """(q, k, 2, 2) ``A_k = S⁻¹ (combos ∂S) S⁻¹`` at θ: the score along ``combos`` is
+        ``Σ_k tr(A_k (S_k - I_k))`` (cached for the last θ and combos: the covariance's two
+        estimates of the score's variance, the model's and the time blocks', share them)."""
+        key = np.asarray(theta, dtype=float).tobytes() + np.asarray(combos, dtype=float).tobytes()
+        if self._weights is None or self._weights[0] != key:
+            S, dS = self.model_at(theta)
+            inv = inv2(S)[0]
+            self._weights = key, mul2(mul2(inv, np.tensordot(combos, dS, axes=1)), inv)
+        return self._weights[1]
+
     def score_covariance(self, theta: np.ndarray, combos: np.ndarray) -> np.ndarray:
         """``combos Cov(∇ℓ) combosᵀ`` under the full (cross-spectral) model at θ.
 
@@ -355,9 +367,7 @@ class WhittleObjective:
         """
         model = self.model
         S_ext = model.fine_spectrum(theta)
-        S, dS = self.model_at(theta)
-        inv = inv2(S)[0]
-        A = mul2(mul2(inv, np.tensordot(combos, dS, axes=1)), inv)  # (q, k, 2, 2)
+        A = self.score_weights(theta, combos)
         c = np.abs(self.window_dft) ** 2
         centre = (c.size - 1) // 2
         w_hat = self.window_dft[centre - model.half: centre + model.half + 1]  # as the model's kernel

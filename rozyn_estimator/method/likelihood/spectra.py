@@ -5,6 +5,7 @@ Fourier frequencies of a band, with the taper's spectral window and the DFT) fro
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 from scipy import fft as sfft
@@ -52,18 +53,28 @@ def window_spectra(
     y = np.asarray(accel_mps2, dtype=float)
     y = y - y.mean(axis=0)
     n = y.shape[0]
-    w = windows.tukey(n, taper) if taper > 0 else np.ones(n)
-    w = w / np.sqrt(np.mean(w * w))
+    w, window_dft = _taper(n, float(taper))
     freq = np.arange(n // 2 + 1) * (fs_hz / n)
     keep = (freq >= band_hz[0]) & (freq <= band_hz[1])
     d = sfft.rfft(y * w[:, None], axis=0)[keep]
     per = d[:, :, None] * d[:, None, :].conj() / (n * fs_hz)
+    return Spectra(freq_hz=freq[keep], periodogram=per, fs_hz=float(fs_hz), n_samples=n,
+                   window_dft=window_dft, dft=d, first_bin=int(np.argmax(keep)))
+
+
+@lru_cache(maxsize=8)
+def _taper(n: int, taper: float) -> tuple[np.ndarray, np.ndarray]:
+    """(the taper of an ``n``-sample window normalised to mean square 1, its DFT ``ŵ_j`` at the
+    Fourier frequencies it reaches, j = -J..J): cached, consecutive windows share them."""
+    w = windows.tukey(n, taper) if taper > 0 else np.ones(n)
+    w = w / np.sqrt(np.mean(w * w))
     w_hat = sfft.fft(w) / n  # Σ |ŵ|² = mean(w²) = 1 (Parseval)
     c = np.abs(w_hat) ** 2
     half = int(np.argmax(np.cumsum(c[: n // 2] + np.r_[0.0, c[:0:-1][: n // 2 - 1]]) >= 1.0 - 1e-4))
     window_dft = np.r_[w_hat[n - half:] if half else np.zeros(0, dtype=complex), w_hat[: half + 1]]
-    return Spectra(freq_hz=freq[keep], periodogram=per, fs_hz=float(fs_hz), n_samples=n,
-                   window_dft=window_dft, dft=d, first_bin=int(np.argmax(keep)))
+    for a in (w, window_dft):
+        a.flags.writeable = False  # shared by the cache
+    return w, window_dft
 
 
 def band_power(spectra: Spectra) -> np.ndarray:
