@@ -12,13 +12,23 @@ compare every result with the same computation on empty caches, bit for bit.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
+import pytest
 from scipy import fft as sfft
 from scipy.signal import windows
 
-from rozyn_estimator.method.likelihood import HalfCarSpectrum, WhittleObjective, covariance, grid, spectra
-from rozyn_estimator.method.likelihood.spectra import window_spectra
+from rozyn_estimator.method.likelihood import (
+    HalfCarSpectrum,
+    LikelihoodConfig,
+    WhittleObjective,
+    covariance,
+    grid,
+    refine,
+    spectra,
+)
+from rozyn_estimator.method.likelihood.spectra import fast_length, window_spectra
 from rozyn_estimator.vehicle import Vehicle
 
 from conftest import TRUTH
@@ -99,3 +109,31 @@ def test_the_score_weights_follow_theta_and_the_combinations():
         inv = np.linalg.inv(S)
         expected = inv[None] @ np.tensordot(c, dS, axes=1) @ inv[None]
         assert np.allclose(got, expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max())
+
+
+@pytest.mark.parametrize("n", [3001, 5501, 9001, 11999, 12001, 12000])
+def test_fast_length(n):
+    m = fast_length(n)
+    assert 0.98 * n <= m <= n
+    for p in (2, 3, 5, 7, 11):
+        while m % p == 0:
+            m //= p
+    assert m == 1
+    assert fast_length(12000) == 12000 and fast_length(3000) == 3000
+
+
+def test_the_refinement_uses_the_newest_samples_of_a_fast_length():
+    """A window of 9 001 samples is refined on its newest 9 000, bit for bit."""
+    from sim_node.road import RoadSpec
+    from sim_node.simulation import SimConfig, Simulation
+
+    block = Simulation(SimConfig(road=RoadSpec(amplitudes="gaussian"), seed=3, duration_s=90.01,
+                                 noise_std_mps2=0.05)).run(90.01)
+    accel, speed = block.accel_mps2, block.speed_mps
+    assert accel.shape[0] == 9001 and fast_length(9001) == 9000
+    cfg = LikelihoodConfig()
+    whole = refine(accel, 100.0, Vehicle(), TRUTH, speed, cfg)
+    newest = refine(accel[1:], 100.0, Vehicle(), TRUTH, speed[1:] if np.ndim(speed) else speed, cfg)
+    assert whole.ok and np.array_equal(whole.params, newest.params)
+    assert np.array_equal(whole.covariance, newest.covariance)
+    assert math.isfinite(whole.neg_log_likelihood) and whole.neg_log_likelihood == newest.neg_log_likelihood

@@ -8,7 +8,8 @@ spectral matrix instead, started from Rozyn's estimate.
 
 Fit. The negative Whittle log-likelihood ℓ(θ) of the window's periodogram matrices
 (:mod:`rozyn_estimator.method.likelihood.objective`) at the Fourier frequencies of the band
-(default 0.5-15 Hz, and at most 60 % of the Nyquist frequency)
+(default 0.5-15 Hz, and at most 60 % of the Nyquist frequency; the window's newest samples of
+an FFT-friendly length, :func:`~rozyn_estimator.method.likelihood.spectra.fast_length`)
 is minimised over ``θ = [ln m, ln I, logit(lf/L), ln σ², ln n_f, ln n_r, w, c_2..c_5]``
 (optionally ``ln ε`` and the log scale factors of the suspension stiffness and damping as
 well) by scipy's
@@ -46,7 +47,7 @@ from rozyn_estimator.method.likelihood.fitcheck import ModelFit, model_fit
 from rozyn_estimator.method.likelihood.model import CORNERS, HalfCarSpectrum
 from rozyn_estimator.method.likelihood.newton import Fits, noise_share
 from rozyn_estimator.method.likelihood.objective import WhittleObjective
-from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, window_spectra
+from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, fast_length, window_spectra
 from rozyn_estimator.method.likelihood.uncertainty import uncertainty
 from rozyn_estimator.vehicle import Vehicle
 
@@ -169,6 +170,8 @@ def _refine(
     if v.size not in (1, y.shape[0]):
         return Refinement(status="failed", reason=f"speed: expected 1 or {y.shape[0]} values, got {v.size}")
     L = vehicle.wheelbase_m
+    n = fast_length(y.shape[0])  # the window's newest n samples (its FFTs' fast length)
+    y, v = y[-n:], v[-n:] if v.size > 1 else v
     spectra = window_spectra(y, fs, band, cfg.taper)
     if spectra.freq_hz.size < 50:
         return Refinement(status="failed", reason=f"too few frequencies in {band[0]:g}-{band[1]:g} Hz")
