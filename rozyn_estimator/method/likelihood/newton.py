@@ -60,15 +60,26 @@ class Fits:
     def _minimize(self, theta0: np.ndarray, fast: bool, max_iter: int) -> tuple[OptimizeResult, bool]:
         """The trust-region Newton iterations from ``theta0``: (result, whether they stalled)."""
         values: list[float] = []
+        started: list[bool] = []
 
         def stop_when_converged(intermediate_result: OptimizeResult) -> None:
             values.append(float(intermediate_result.fun))
             if self._decrement(intermediate_result.x) < self.tol or _stalled(values, self.tol):
                 raise StopIteration
 
+        def hess(theta: np.ndarray) -> np.ndarray:
+            # scipy's trust region takes the Hessian with each proposed point, before its
+            # callback. Where the fit has converged it is never used (the step is taken and
+            # the callback stops, or it is rejected): the Fisher information (already there)
+            # stands in for the sharper Hessian's exact rows. The start's is always used.
+            if started and self._decrement(theta) < self.tol:
+                return self.objective.fisher(theta)
+            started.append(True)
+            return self.objective.hess(theta)
+
         self.objective.fast = fast
         try:
-            res = minimize(self.objective.fun, theta0, jac=self.objective.jac, hess=self.objective.hess,
+            res = minimize(self.objective.fun, theta0, jac=self.objective.jac, hess=hess,
                            method="trust-exact", callback=stop_when_converged,
                            options={"gtol": 1e-12, "maxiter": max_iter})
             stalled = _stalled(values, self.tol)
