@@ -46,6 +46,9 @@ def test_what_the_full_car_cannot_do_is_refused_with_a_reason(capsys):
     assert "the full car has likelihood, rozyn" in capsys.readouterr().err
     assert main(["trial", "--model", "full", "--vehicle", "config/vehicle.yaml"]) == 1
     assert "half-car vehicle file" in capsys.readouterr().err
+    for option in (["--damper-ratio", "2"], ["--gain-error", "0.03", "0"], ["--stiffness-error", "0.05"]):
+        assert main(["trial", "--model", "full", *option]) == 1, option
+        assert f"{option[0]}: not available with --model full" in capsys.readouterr().err
 
 
 def test_the_table_names_the_five_parameters(capsys):

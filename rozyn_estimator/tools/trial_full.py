@@ -22,6 +22,7 @@ import numpy as np
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS, PipelineConfig
 from rozyn_estimator.method.full import FULL_PARAM_NAMES, FullEstimate, estimate_full
+from rozyn_estimator.tools.options import departures_given
 from rozyn_estimator.tools.trial import parallel_map, parse_seeds
 from rozyn_estimator.vehicle_full import FullVehicle, load_full_vehicle
 from sim_node.road import RoadSpec
@@ -75,6 +76,10 @@ def spec_from_args(args: argparse.Namespace) -> FullTrialSpec:
     """The full-car trial the ``rozyn trial`` options describe (refusing what it cannot do)."""
     if args.method not in METHODS_FULL:
         raise ConfigError(f"method: the full car has {', '.join(METHODS_FULL)}; got {args.method!r}")
+    given = departures_given(args)
+    if given:
+        raise ConfigError(f"{', '.join(given)}: not available with --model full (the half car's departures "
+                          "of the vehicle and its sensors from the estimator's model)")
     vehicle = load_full_vehicle(args.vehicle) if args.vehicle else FullVehicle()
     if args.road == "free-decay":
         raise ConfigError("road: --model full drives over ISO 8608 or Laplace roads (free decay: the tests)")
