@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 from numpy.polynomial import legendre
 from scipy import sparse
 
@@ -151,9 +152,11 @@ def _reduction(n_bins: int, kernel: tuple[float, ...], step: int) -> Reduction:
     lo = first[:n_bins]
     width = int(np.max(first[taps.size - 1:] - lo)) + weights.shape[1]
     rows = np.arange(n_bins)
-    j = np.arange(taps.size)[:, None]
-    at = (rows * width + first[j + rows] - lo)[:, :, None] + np.arange(weights.shape[1])  # (taps, k, points)
-    values = taps[:, None, None] * weights[j + rows]
+    # tap j of bin k reads fine bin k + j: sliding windows over the fine bins (views, no gather)
+    first_at = sliding_window_view(first, taps.size)[:n_bins].T  # (taps, k)
+    weights_at = sliding_window_view(weights, taps.size, axis=0)[:n_bins].transpose(2, 0, 1)  # like at
+    at = (rows * width + first_at - lo)[:, :, None] + np.arange(weights.shape[1])  # (taps, k, points)
+    values = taps[:, None, None] * weights_at
     block = np.bincount(at.ravel(), values.ravel(), minlength=n_bins * width).reshape(n_bins, width)
     cols = np.minimum(lo[:, None] + np.arange(width)[None, :], n_nodes - 1)  # padding (zeros) stays in range
     to_bins = sparse.csr_array((block.ravel(), cols.ravel(), np.arange(0, n_bins * width + 1, width)),

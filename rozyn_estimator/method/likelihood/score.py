@@ -70,7 +70,7 @@ def covariance_sum(A: np.ndarray, S_ext: np.ndarray, w_hat: np.ndarray, step: in
     bins = starts + (counts - 1) // 2
     lags, C = _lag_covariances(S_ext, w_hat, bins)
     h = _hermitian_numbers(A)  # (q, k, 4)
-    g = np.einsum("dkxy,iky->idkx", _congruence(C), h[:, bins])  # (q, n_δ, kc, 4)
+    g = np.matmul(_congruence(C), h[:, bins, :, None][:, None])[..., 0]  # (q, n_δ, kc, 4): each L h
     partner = bins[None, :] + lags[:, None]
     # the bins of each block whose partner k + δ lies in the band, counted exactly (the
     # band's edges are where the summand is not smooth)
