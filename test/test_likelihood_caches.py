@@ -6,7 +6,9 @@ on sensors whose stamps jitter, the length changes from one update to the next. 
 taper and its DFT (``spectra``), the evaluation grid and its sparse map (``grid``) and the
 score's weights (``objective``) are cached; these tests interleave windows of other
 lengths, rates, tapers, model settings and vehicles (wheelbase, sensor positions), then
-compare every result with the same computation on empty caches, bit for bit.
+compare every result with the same computation on empty caches, bit for bit. A warm update
+keeps the last window's sensitivities (``sensitivity``) only for the same vehicle and
+settings and a θ that barely moved.
 """
 
 from __future__ import annotations
@@ -137,3 +139,43 @@ def test_the_refinement_uses_the_newest_samples_of_a_fast_length():
     assert whole.ok and np.array_equal(whole.params, newest.params)
     assert np.array_equal(whole.covariance, newest.covariance)
     assert math.isfinite(whole.neg_log_likelihood) and whole.neg_log_likelihood == newest.neg_log_likelihood
+
+
+def test_a_warm_update_keeps_the_sensitivities_only_where_they_hold():
+    """The next window keeps the last one's sensitivities (θ barely moved); another vehicle (its
+    sensors elsewhere, its tolerances), other settings or a θ moved by more than 0.01 get their
+    own, equal to those computed with nothing to keep."""
+    from sim_node.road import RoadSpec
+    from sim_node.simulation import SimConfig, Simulation
+
+    block = Simulation(SimConfig(road=RoadSpec(amplitudes="gaussian"), seed=3, duration_s=65.0,
+                                 noise_std_mps2=0.05)).run(65.0)
+    accel, speed = block.accel_mps2, float(np.mean(block.speed_mps))
+    first, nxt = accel[:6000], accel[500:6500]
+    cfg = LikelihoodConfig()
+    last = refine(first, 100.0, Vehicle(), TRUTH, speed, cfg)
+    assert last.ok and last.sensitivities is not None and set(last.sensitivities.per_unit) == {"wheelbase_m"}
+    kept = refine(nxt, 100.0, Vehicle(), TRUTH, speed, cfg, warm=last)
+    assert kept.sensitivities is last.sensitivities
+    taken = last.sensitivities
+    moved_body = dataclasses.replace(taken, body=taken.body + np.array([0.02, 0.0, 0.0]))
+    tolerances = dataclasses.replace(Vehicle().tolerances, wheelbase_m=0.01)
+    looser = dataclasses.replace(Vehicle(), tolerances=tolerances)
+    for vehicle, settings, warm in [
+        (MOVED, cfg, last),  # another sensor layout and wheelbase
+        (looser, cfg, last),  # other tolerances
+        (Vehicle(), dataclasses.replace(cfg, block_weight=0.4), last),  # other settings
+        (Vehicle(), cfg, dataclasses.replace(last, sensitivities=moved_body)),  # θ moved
+    ]:
+        got = refine(nxt, 100.0, vehicle, TRUTH, speed, settings, warm=warm)
+        nothing_kept = dataclasses.replace(warm, sensitivities=None)
+        fresh = refine(nxt, 100.0, vehicle, TRUTH, speed, settings, warm=nothing_kept)
+        assert got.ok and got.sensitivities is not warm.sensitivities
+        assert got.sensitivities.vehicle == vehicle and got.sensitivities.config == settings
+        for key, value in fresh.contributions.items():
+            assert np.array_equal(got.contributions[key], value), key
+        assert np.array_equal(got.covariance, fresh.covariance)
+    # what keeping them costs: the wheelbase's part within 5 % of the window's own, the std within 0.1 %
+    own = refine(nxt, 100.0, Vehicle(), TRUTH, speed, cfg, warm=dataclasses.replace(last, sensitivities=None))
+    assert np.allclose(kept.contributions["wheelbase_m"], own.contributions["wheelbase_m"], rtol=0.05)
+    assert np.allclose(np.diag(kept.covariance), np.diag(own.covariance), rtol=2e-3)

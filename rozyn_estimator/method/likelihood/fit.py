@@ -47,6 +47,7 @@ from rozyn_estimator.method.likelihood.fitcheck import ModelFit, model_fit
 from rozyn_estimator.method.likelihood.model import CORNERS, HalfCarSpectrum
 from rozyn_estimator.method.likelihood.newton import Fits, noise_share
 from rozyn_estimator.method.likelihood.objective import WhittleObjective
+from rozyn_estimator.method.likelihood.sensitivity import Sensitivities
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, fast_length, window_spectra
 from rozyn_estimator.method.likelihood.uncertainty import uncertainty
 from rozyn_estimator.vehicle import Vehicle
@@ -78,6 +79,7 @@ class Refinement:
     calibration: tuple[Calibration, ...] = ()  # the values the data calibrated
     model_fit: ModelFit | None = None  # the goodness-of-fit check
     contributions: dict[str, np.ndarray] = field(default_factory=dict)  # assumed value -> (3,) per 1 u
+    sensitivities: Sensitivities | None = None  # of the values left assumed, where they were taken
     elapsed_ms: float = 0.0
     notes: tuple[str, ...] = field(default=())
 
@@ -231,7 +233,8 @@ def _refine(
         notes.append(f"likelihood fit: not converged in {cfg.max_iter} iterations")
     try:
         _check_noise(theta, objective, cfg)
-        found = uncertainty(objective, model, theta, vehicle, cfg, y)
+        found = uncertainty(objective, model, theta, vehicle, cfg, y,
+                            warm.sensitivities if isinstance(warm, Refinement) else None)
         if not found.converged:
             notes.append(f"likelihood calibration: not converged in {cfg.max_iter} iterations")
         _check(found.params, found.covariance, L)
@@ -251,7 +254,7 @@ def _refine(
         suspension_scale=tuple(np.exp(theta[model.corner_slice][:4]).tolist()) if cfg.estimate_suspension
         else (),
         variance_factors=tuple(found.factors.tolist()), notes=tuple(notes), calibration=found.calibration,
-        contributions=found.contributions, model_fit=fit,
+        contributions=found.contributions, model_fit=fit, sensitivities=found.sensitivities,
     )
 
 

@@ -16,16 +16,22 @@ the model with ``β`` moved by a small step (the model recomputed, nothing re-fi
 really changes.
 
 The information is the objective's own at θ̂ (already computed for the covariance); each
-``∂_βS`` costs two evaluations of the model without derivatives.
+``∂_βS`` costs two evaluations of the model without derivatives. They are the model's
+sensitivities at θ̂, not the data's: they change about as much as θ̂ does, so a warm update
+keeps the previous window's (:func:`sensitivities_near`) while its body parameters (ln m,
+ln I, logit lf/L) have moved less than 0.01 (as the full car's budget does), for the same
+vehicle and settings.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
+from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.covariance import inverse_information, kept
 from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
 from rozyn_estimator.method.likelihood.objective import WhittleObjective, whitened
@@ -38,6 +44,30 @@ _ABS_STEP = {"wheelbase_m": 1e-4, "sensor_front_offset_m": 1e-4, "sensor_rear_of
 GEOMETRY = ("wheelbase_m", "sensor_front_offset_m", "sensor_rear_offset_m")
 SENSORS = ("sensor_gain_front", "sensor_gain_rear", "sensor_time_offset_s")
 ASSUMED = (*RELATIVE_FIELDS, *GEOMETRY, *SENSORS)  # every value a sensitivity can be asked for
+_MOVE = 0.01  # a warm update keeps the sensitivities while ln m, ln I, logit(lf/L) move less
+
+
+@dataclass(frozen=True)
+class Sensitivities:
+    """d(m, I, lf)/dβ per assumed value and where they were taken: the body parameters θ[:3],
+    the vehicle and the settings."""
+
+    per_unit: dict[str, np.ndarray]  # key -> (3,) per unit of the value
+    body: np.ndarray  # (ln m, ln I, logit lf/L) they were taken at
+    vehicle: Vehicle
+    config: LikelihoodConfig
+
+
+def sensitivities_near(
+    objective: WhittleObjective, model: HalfCarSpectrum, theta: np.ndarray, keys: Sequence[str],
+    vehicle: Vehicle, config: LikelihoodConfig, previous: Sensitivities | None = None,
+) -> Sensitivities:
+    """:func:`sensitivities` at θ, or ``previous`` (the last window's) when they were taken for
+    the same values, vehicle and settings at body parameters within ``_MOVE`` of θ's."""
+    if (previous is not None and set(previous.per_unit) == set(keys) and previous.vehicle == vehicle
+            and previous.config == config and np.max(np.abs(theta[:3] - previous.body)) < _MOVE):
+        return previous
+    return Sensitivities(sensitivities(objective, model, theta, keys), theta[:3].copy(), vehicle, config)
 
 
 def sensitivities(

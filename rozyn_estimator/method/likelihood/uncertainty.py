@@ -26,7 +26,7 @@ from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.covariance import sandwich_covariance
 from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
 from rozyn_estimator.method.likelihood.objective import WhittleObjective
-from rozyn_estimator.method.likelihood.sensitivity import sensitivities
+from rozyn_estimator.method.likelihood.sensitivity import Sensitivities, sensitivities_near
 from rozyn_estimator.vehicle import Vehicle
 
 
@@ -41,12 +41,16 @@ class Uncertainty:
     calibration: tuple[Calibration, ...]
     objective: WhittleObjective  # the (calibrated) posterior's
     theta: np.ndarray  # its parameters at the estimate
+    sensitivities: Sensitivities  # of the values left assumed (the next window's may reuse them)
     converged: bool = True  # False: the calibration's optimiser stopped at its iteration limit
 
 
-def uncertainty(objective: WhittleObjective, model: HalfCarSpectrum, theta: np.ndarray, vehicle: Vehicle,
-                cfg: LikelihoodConfig, accel: np.ndarray) -> Uncertainty:
-    """The budget of the fit's optimum ``theta`` (raises CovarianceError when there is none)."""
+def uncertainty(
+    objective: WhittleObjective, model: HalfCarSpectrum, theta: np.ndarray, vehicle: Vehicle,
+    cfg: LikelihoodConfig, accel: np.ndarray, previous: Sensitivities | None = None,
+) -> Uncertainty:
+    """The budget of the fit's optimum ``theta`` (raises CovarianceError when there is none);
+    ``previous``: the last window's sensitivities (kept while θ has barely moved)."""
     todo = plan(vehicle, model)
     stds: dict[str, float] = {}
     start = stepped = theta
@@ -58,10 +62,11 @@ def uncertainty(objective: WhittleObjective, model: HalfCarSpectrum, theta: np.n
     cov, factors, parts = sandwich_covariance(objective, model, start, cfg, accel)
     contributions = {(CALIBRATED.get(name) or POSITION_KEYS[name]): c for name, c in parts.items()}
     assumed = _assumed(vehicle, cfg, set(contributions))
-    sens = sensitivities(objective, model, start, list(assumed))
-    contributions |= {key: sens[key] * u for key, u in assumed.items()}
-    return Uncertainty(model.physical(stepped), cov, factors, contributions,
-                       calibration(objective, model, start, stepped, stds), objective, stepped, converged)
+    sens = sensitivities_near(objective, model, start, list(assumed), vehicle, cfg, previous)
+    contributions |= {key: sens.per_unit[key] * u for key, u in assumed.items()}
+    found = calibration(objective, model, start, stepped, stds)
+    return Uncertainty(model.physical(stepped), cov, factors, contributions, found, objective, stepped, sens,
+                       converged)
 
 
 def _assumed(vehicle: Vehicle, cfg: LikelihoodConfig, calibrated: set[str]) -> dict[str, float]:
