@@ -200,3 +200,54 @@ def test_signals_during_updates_end_estimator_node_cleanly_20_times():
     assert not failures, failures
     assert len(results) == 20 and computing >= 1, computing  # mid-update, deterministic: the test above
     assert at_work >= 14, f"only {at_work} of 20 signals found updates at work"
+
+
+def _nodes(tmp_path: Path, env: dict[str, str]) -> dict[str, subprocess.Popen[str]]:
+    """The three executables as a user starts them: sim on sim time, estimator, recorder."""
+    config = ROOT / "config"
+    commands = {
+        "sim_node": ["--params-file", str(config / "sim.yaml"),
+                     "--params-file", str(config / "vehicle.yaml")],
+        "estimator_node": ["--params-file", str(config / "vehicle.yaml"), "-p", "use_sim_time:=true",
+                           "-p", "speed_topic:=sim/speed", "-p", "window_s:=20.0", "-p", "qos_depth:=10000"],
+        "bag_recorder": ["-p", "use_sim_time:=true", "-p", f"output:={tmp_path / 'bag'}"],
+    }
+    return {
+        name: subprocess.Popen([str(BIN / name), "--ros-args", *args], env=env, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, start_new_session=True)
+        for name, args in commands.items()
+    }
+
+
+@pytest.mark.parametrize("moment", ["start-up", "running"])
+def test_the_three_nodes_stop_cleanly_at_any_moment(moment, tmp_path):
+    """SIGINT or SIGTERM during the imports and the nodes' construction, or once estimates
+    flow: each node ends with status 0 and nothing worse than a WARN, the bag is whole."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN), PYTHONUNBUFFERED="1")
+    rng = random.Random(moment)
+    procs = _nodes(tmp_path, env)
+    try:
+        if moment == "start-up":
+            for k, proc in enumerate(procs.values()):
+                time.sleep(rng.uniform(0.2, 0.8))
+                os.killpg(proc.pid, SIGNALS[k % 2])
+        else:
+            with ros_session(DOMAIN) as ros:
+                got: list[InertiaStamped] = []
+                ros.probe.create_subscription(InertiaStamped, "inertia", got.append, 10)
+                recording = ros.spin_until(lambda: ros.probe.count_subscribers("/accel/front") == 2, 90.0)
+                assert recording, "the estimator and the recorder are not both subscribed to /accel/front"
+                assert ros.spin_until(lambda: got, 90.0), "no estimate"
+            for k, proc in enumerate(procs.values()):
+                os.killpg(proc.pid, SIGNALS[k % 2])
+        outputs = {name: proc.communicate(timeout=60) for name, proc in procs.items()}
+    finally:
+        for proc in procs.values():
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+    for name, (out, err) in outputs.items():
+        assert procs[name].returncode == 0, (name, err)
+        assert not BAD_WORDS.search(out + err), (name, err)
+    if (tmp_path / "bag").exists():  # the recorder got as far as creating it: a whole bag
+        counts = check_bag(tmp_path / "bag")
+        assert moment == "start-up" or counts["/accel/front"] > 0
