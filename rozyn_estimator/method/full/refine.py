@@ -41,10 +41,10 @@ from scipy.signal import windows
 
 from rozyn_estimator.method.full.blocks import variance_factors
 from rozyn_estimator.method.full.refine_budget import refinement_contributions
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.spectrum import FullCarSpectrum, expected_periodogram_m2
 from rozyn_estimator.method.full.whittle import FullWhittle, ridged
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
-from rozyn_estimator.method.likelihood.spectra import band_power, window_spectra
+from rozyn_estimator.method.likelihood.spectra import band_power, taper_window, window_spectra
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
 
 _MIN_NOISE = 1e-9  # the model's fixed white floor, share of each channel's band power
@@ -144,7 +144,8 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
                                          max(1, int(_GROUP_HZ * y.shape[0] / fs + 1e-9)))
     model = FullCarSpectrum(vehicle, sensors, freq, fs, v if v.size > 1 else float(v[0]),
                             cfg.aliases, f_ref_hz=math.sqrt(band[0] * band[1]),
-                            road_shape_terms=cfg.road_shape_terms, min_noise_psd=_MIN_NOISE * power)
+                            road_shape_terms=cfg.road_shape_terms, min_noise_psd=_MIN_NOISE * power,
+                            kernel_m2_hz2=_kernel_m2(y.shape[0], fs, cfg.taper, counts))
     objective = FullWhittle(model, periodogram, counts)
     best: OptimizeResult | None = None
     iterations = starts = 0
@@ -237,6 +238,14 @@ def _grouped(freq_hz: np.ndarray, periodogram: np.ndarray, step: int) -> tuple[n
     counts = np.diff(np.r_[starts, freq_hz.size]).astype(float)
     return (np.add.reduceat(freq_hz, starts) / counts,
             np.add.reduceat(periodogram, starts, axis=0) / counts[:, None, None], counts)
+
+
+def _kernel_m2(n: int, fs: float, taper: float, counts: np.ndarray) -> np.ndarray:
+    """Each mean ordinate's averaging kernel's second moment [Hz²]: the taper's spectral window
+    and the spread of the group's bins, ``Δf² (c² - 1) / 12`` (:func:`expected_periodogram_m2`;
+    an untapered window is taken as periodic, as the simulator's records are: no smoothing)."""
+    window_m2 = expected_periodogram_m2(taper_window(n, taper), fs) if taper > 0 else 0.0
+    return window_m2 + (fs / n) ** 2 * (counts**2 - 1.0) / 12.0
 
 
 def _minimize(objective: FullWhittle, theta0: np.ndarray, cfg: LikelihoodConfig,

@@ -78,6 +78,11 @@ def _taper(n: int, taper: float) -> tuple[np.ndarray, np.ndarray]:
     return w, window_dft
 
 
+def taper_window(n: int, taper: float) -> np.ndarray:
+    """The taper :func:`window_spectra` applies to an ``n``-sample window (mean square 1)."""
+    return _taper(n, float(taper))[0]
+
+
 def fast_length(n: int) -> int:
     """The longest length of at most ``n`` samples whose FFTs are fast: 11-smooth (the radices
     pocketfft has passes for). The refinement keeps a window's newest ``fast_length(n)``
