@@ -111,7 +111,9 @@ def test_interrupted_study_resumes_to_identical_results(reference, tmp_path, mon
 
 def test_ctrl_c_stops_workers_and_keeps_finished_trials(tmp_path):
     out = tmp_path / "signal"
-    grid = ["--roads", "laplace", "--speeds-kmh", "30:100:10", "--durations-s", "120", "--trials", "20"]
+    # 3200 trials: a minute or more on 2 cores, so the signal (sent once 7 rows are written,
+    # a second or so in) always finds it running; 160 trials once finished before it
+    grid = ["--roads", "laplace", "--speeds-kmh", "30:100:10", "--durations-s", "120", "--trials", "400"]
     cmd = [str(Path(sys.executable).parent / "rozyn"), "study", *grid, "--out", str(out), "--jobs", "2",
            "--chunk-trials", "2", "--no-plots"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -121,12 +123,13 @@ def test_ctrl_c_stops_workers_and_keeps_finished_trials(tmp_path):
         if results.exists() and results.read_text().count("\n") > 6:
             break
         time.sleep(0.05)
+    assert proc.poll() is None, "the study ended before the signal"
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, err
     assert "continue with --resume" in err and "Traceback" not in err
     done = study.read_results(out / "results.csv")
-    assert 6 <= len(done) < 160
+    assert 6 <= len(done) < 3200
     assert json.loads((out / "study.json").read_text())["runs"][-1]["status"] == "interrupted"
 
 
