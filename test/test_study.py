@@ -117,7 +117,10 @@ def test_ctrl_c_stops_workers_and_keeps_finished_trials(tmp_path):
             "--method", "likelihood"]
     cmd = [str(Path(sys.executable).parent / "rozyn"), "study", *grid, "--out", str(out), "--jobs", "2",
            "--chunk-trials", "2", "--no-plots"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # as a terminal starts it: SIGINT at its default (a test run from a background job inherits
+    # it ignored, and Python then never raises KeyboardInterrupt)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and proc.poll() is None:
         results = out / "results.csv"
