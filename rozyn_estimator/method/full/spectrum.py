@@ -32,7 +32,7 @@ coherence is not exactly the isotropic surface's: its one nuisance).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -75,7 +75,7 @@ class FullCarSpectrum:
         shape_edges_hz: the band the road shape's polynomials span (default: the grid's).
         kernel_m2_hz2: (K,) or a number: the second moment [Hz²] of the kernel that makes each
             periodogram ordinate a local average of S (the taper's spectral window, a group's
-            spread of bins; :func:`expected_periodogram`); 0: the model is S itself.
+            spread of bins; :func:`expected_periodogram_m2`); 0: the model is S itself.
     """
 
     def __init__(self, vehicle: FullVehicle, sensors: Sequence[int], freq_hz: np.ndarray, fs_hz: float,
@@ -94,7 +94,7 @@ class FullCarSpectrum:
         self.k = len(self.sensors)
         self._average = _averaging(freq_hz, m2) if np.any(m2 > 0) and freq_hz.size > 1 else None
         if self._average is not None:  # S is evaluated a step beyond each end as well
-            freq_hz = np.r_[2 * freq_hz[0] - freq_hz[1], freq_hz, 2 * freq_hz[-1] - freq_hz[-2]]
+            freq_hz = _extended(freq_hz)
         self.n_freq, self.n_alias = freq_hz.size, 2 * aliases + 1
         f = (freq_hz[None, :] + np.arange(-aliases, aliases + 1)[:, None] * fs_hz).ravel()
         self.omega = 2.0 * np.pi * f
@@ -255,7 +255,12 @@ def expected_periodogram_m2(taper: np.ndarray, fs_hz: float) -> float:
     return float(np.sum(np.diff(np.r_[0.0, w, 0.0]) ** 2) / np.sum(w * w) / (4.0 * np.pi**2) * fs_hz**2)
 
 
-def _averaging(freq_hz: np.ndarray, m2_hz2: np.ndarray) -> Any:
+def _extended(freq_hz: np.ndarray) -> np.ndarray:
+    """``freq_hz`` with one more frequency beyond each end, at the end's own spacing."""
+    return np.r_[2 * freq_hz[0] - freq_hz[1], freq_hz, 2 * freq_hz[-1] - freq_hz[-2]]
+
+
+def _averaging(freq_hz: np.ndarray, m2_hz2: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
     """The map from S at ``freq_hz`` extended a step beyond each end (K + 2) to the expected
     periodogram at ``freq_hz`` (K): ``S + m₂ S''/2`` with S'' the (non-uniform) second
     difference. Its weights are kept non-negative (``m₂`` is about a tenth of the spacing's
@@ -266,8 +271,8 @@ def _averaging(freq_hz: np.ndarray, m2_hz2: np.ndarray) -> Any:
     frequency (the rear's delay, the resonances' phase). A periodogram averaged across that
     turn (the taper's window, groups of bins) has power there that S lacks; with quiet
     sensors the roll inertia absorbed it (+10-17 % at 100 km/h with 1 % noise)."""
-    f = np.r_[2 * freq_hz[0] - freq_hz[1], freq_hz, 2 * freq_hz[-1] - freq_hz[-2]]
-    h1, h2 = np.diff(f)[:-1], np.diff(f)[1:]
+    step = np.diff(_extended(freq_hz))
+    h1, h2 = step[:-1], step[1:]
     below, above = m2_hz2 / (h1 * (h1 + h2)), m2_hz2 / (h2 * (h1 + h2))
     cap = np.minimum(1.0, 1.0 / np.maximum(below + above, 1e-300))
     below, above = below * cap, above * cap
