@@ -12,8 +12,9 @@ from scipy.signal import windows
 
 from rozyn_estimator.method import METHODS
 from rozyn_estimator.method.full import estimate_full
+from rozyn_estimator.method.full.grid import averaging_matrix
 from rozyn_estimator.method.full.refine import refine_full
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum, _averaging, expected_periodogram_m2
+from rozyn_estimator.method.full.spectrum import FullCarSpectrum, expected_periodogram_m2
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
@@ -49,12 +50,13 @@ def test_the_average_is_exact_to_second_order_and_keeps_s_positive_definite():
         return A + (x[:, None, None] - 1.0) ** 2 * B
 
     ext = np.r_[2 * f[0] - f[1], f, 2 * f[-1] - f[-2]]
-    got = _averaging(f, m2)(s_of(ext))
+    got = np.einsum("kj,jab->kab", averaging_matrix(f, m2).toarray(), s_of(ext))
     np.testing.assert_allclose(got, s_of(f) + m2[:, None, None] * B, rtol=0, atol=1e-12)
     rng = np.random.default_rng(1)
     x = rng.standard_normal((f.size + 2, 4, 4)) + 1j * rng.standard_normal((f.size + 2, 4, 4))
     spd = x @ x.conj().swapaxes(-1, -2) + 1e-9 * np.eye(4)
-    assert np.all(np.linalg.eigvalsh(_averaging(f, np.full(f.size, 2e-4))(spd)) > 0)
+    average = np.einsum("kj,jab->kab", averaging_matrix(f, np.full(f.size, 2e-4)).toarray(), spd)
+    assert np.all(np.linalg.eigvalsh(average) > 0)
 
 
 def test_the_derivatives_are_those_of_the_averaged_model():

@@ -75,6 +75,41 @@ def corner_matrices(v: FullVehicle, s: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return zs - zs @ solved[:, :, :4], zs @ solved[:, :, 4:]
 
 
+CORNER_VALUES = ("suspension_stiffness_npm", "suspension_damping_nspm", "tyre_stiffness_npm",
+                 "tyre_damping_nspm", "unsprung_mass_kg", "anti_roll_stiffness_front_nmprad",
+                 "anti_roll_stiffness_rear_nmprad")
+"""The values :func:`corner_matrices` depends on beside the geometry: four corners' each, two bars."""
+
+
+def corner_matrix_derivatives(v: FullVehicle, s: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray,
+                                                                                               np.ndarray]:
+    """``(dZ, dT)`` (G, F, 4, 4) of :func:`corner_matrices` along ``directions`` (G, 22): per
+    direction the change of the :data:`CORNER_VALUES` (4 corners each for the first five, then
+    the front and rear bars). With ``A = N⁻¹``: ``dZ = dZ_s - dZ_s A Z_s - Z_s A dZ_s +
+    Z_s A dN A Z_s`` and ``dT = (dZ_s - Z_s A dN) A Z_t + Z_s A dZ_t`` (``N``, ``Z_s``
+    symmetric, so ``Z_s A = (A Z_s)ᵀ``)."""
+    s = np.asarray(s)[:, None]
+    zs = (np.asarray(v.suspension_stiffness_npm) + s * np.asarray(v.suspension_damping_nspm))[:, :, None] \
+        * np.eye(4) + _axle_bars(v)
+    zt = np.asarray(v.tyre_stiffness_npm) + s * np.asarray(v.tyre_damping_nspm)  # (F, 4) diagonal
+    A = np.linalg.inv(zs + (zt + np.asarray(v.unsprung_mass_kg) * s * s)[:, :, None] * np.eye(4))
+    a_zs = A @ zs
+    d = np.asarray(directions, dtype=float)
+    ks, cs, kt, ct, mu = (d[:, None, 4 * i: 4 * i + 4] for i in range(5))  # (G, 1, 4) each
+    bars = np.zeros((d.shape[0], 4, 4))
+    pattern = np.array([[1.0, -1.0], [-1.0, 1.0]])
+    bars[:, :2, :2] = d[:, 20, None, None] / v.track_front_m**2 * pattern
+    bars[:, 2:, 2:] = d[:, 21, None, None] / v.track_rear_m**2 * pattern
+    eye = np.eye(4)
+    d_zs = (ks + s * cs)[..., None] * eye + bars[:, None]  # (G, F, 4, 4)
+    d_zt = kt + s * ct  # (G, F, 4) diagonal
+    d_n = d_zs + (d_zt + mu * s * s)[..., None] * eye
+    zs_a = a_zs.swapaxes(-1, -2)
+    d_z = d_zs - d_zs @ a_zs - zs_a @ d_zs + zs_a @ d_n @ a_zs
+    d_t = (d_zs - zs_a @ d_n) @ A * zt[:, None, :] + zs_a * d_zt[..., None, :]
+    return d_z, d_t
+
+
 def corner_stiffness(v: FullVehicle, s: complex, model: str) -> np.ndarray:
     """(4, 4) complex dynamic stiffness of the corners at pole ``s`` [N/m], the half car's
     three models (:mod:`rozyn_estimator.method.fit`) in matrix form:

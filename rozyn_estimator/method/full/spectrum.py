@@ -32,14 +32,15 @@ coherence is not exactly the isotropic surface's: its one nuisance).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from numpy.polynomial import legendre
-from scipy import special
+from scipy import sparse, special
 
-from rozyn_estimator.method.full.fit import corner_matrices
+from rozyn_estimator.method.full.fit import corner_matrices, corner_matrix_derivatives
+from rozyn_estimator.method.full.grid import ALIAS_STEP, alias_map, apply, evaluation_map
 from rozyn_estimator.method.likelihood.road_input import delay_characteristic
 from rozyn_estimator.vehicle_full import FullVehicle
 
@@ -47,6 +48,11 @@ _CORNER_FIELDS = ("wheelbase_m", "track_front_m", "track_rear_m", "unsprung_mass
                   "tyre_damping_nspm", "suspension_stiffness_npm", "suspension_damping_nspm",
                   "anti_roll_stiffness_front_nmprad", "anti_roll_stiffness_rear_nmprad")
 BODY_NAMES = ("ln_mass", "ln_roll_inertia", "ln_pitch_inertia", "logit_cog", "cog_lateral_m")
+
+
+def corner_values(v: FullVehicle) -> tuple[Any, ...]:
+    """What the corners' matrices, the rear's delay and the tracks' coherence depend on."""
+    return tuple(getattr(v, name) for name in _CORNER_FIELDS)
 
 
 def track_coherence(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -76,32 +82,39 @@ class FullCarSpectrum:
         kernel_m2_hz2: (K,) or a number: the second moment [Hz²] of the kernel that makes each
             periodogram ordinate a local average of S (the taper's spectral window, a group's
             spread of bins; :func:`expected_periodogram_m2`); 0: the model is S itself.
+        grid_hz: S is evaluated this far apart and interpolated (:mod:`.grid`); 0: at each
+            frequency.
     """
 
     def __init__(self, vehicle: FullVehicle, sensors: Sequence[int], freq_hz: np.ndarray, fs_hz: float,
                  speed_mps: float | np.ndarray, aliases: int = 1, f_ref_hz: float = 3.0,
                  road_shape_terms: int = 2, min_noise_psd: np.ndarray | None = None,
                  shape_edges_hz: tuple[float, float] | None = None,
-                 kernel_m2_hz2: np.ndarray | float = 0.0) -> None:
+                 kernel_m2_hz2: np.ndarray | float = 0.0, grid_hz: float = 0.0) -> None:
         self.freq_hz = freq_hz
         edges_hz = shape_edges_hz or (float(freq_hz.min()), float(freq_hz.max()))
         m2 = np.broadcast_to(np.asarray(kernel_m2_hz2, dtype=float), freq_hz.shape)
         self._settings: dict[str, Any] = dict(  # what subset() rebuilds the model from
             vehicle=vehicle, sensors=sensors, fs_hz=fs_hz, speed_mps=speed_mps, aliases=aliases,
             f_ref_hz=f_ref_hz, road_shape_terms=road_shape_terms, min_noise_psd=min_noise_psd,
-            shape_edges_hz=edges_hz, kernel_m2_hz2=m2)
+            shape_edges_hz=edges_hz, kernel_m2_hz2=m2, grid_hz=grid_hz)
         self.sensors = tuple(sensors)
         self.k = len(self.sensors)
-        self._average = _averaging(freq_hz, m2) if np.any(m2 > 0) and freq_hz.size > 1 else None
-        if self._average is not None:  # S is evaluated a step beyond each end as well
-            freq_hz = _extended(freq_hz)
-        self.n_freq, self.n_alias = freq_hz.size, 2 * aliases + 1
-        f = (freq_hz[None, :] + np.arange(-aliases, aliases + 1)[:, None] * fs_hz).ravel()
+        nodes, self._op = evaluation_map(freq_hz, m2, grid_hz)  # where S is evaluated, the map from there
+        self._op_t = None if self._op is None else sparse.csr_array(self._op.T)
+        self._row_ops: dict[bytes, sparse.csr_array] = {}  # the map's rows at some frequencies
+        self.grid_hz = grid_hz if self._op is not None and nodes.size < self.freq_hz.size else 0.0
+        alias_nodes, self._alias_fold = alias_map(nodes, ALIAS_STEP if self.grid_hz > 0 else 1)
+        shifts = np.array([a for a in range(-aliases, aliases + 1) if a != 0], dtype=float) * fs_hz
+        self.n_freq, self.n_alias_terms, self.n_alias_nodes = nodes.size, shifts.size, alias_nodes.size
+        self.nodes_hz = nodes
+        f = np.r_[nodes, (alias_nodes[None, :] + shifts[:, None]).ravel()]  # the band's nodes, then aliases'
         self.omega = 2.0 * np.pi * f
         self.speed_mps = speed_mps
         self.log_shape = np.log(np.abs(f) / f_ref_hz)
         edges = np.log(np.array(edges_hz) / f_ref_hz)
-        x = np.clip((2.0 * self.log_shape - edges.sum()) / (edges[1] - edges[0]), -1.0, 1.0)
+        x = (2.0 * self.log_shape - edges.sum()) / (edges[1] - edges[0])
+        x[nodes.size:] = np.clip(x[nodes.size:], -1.0, 1.0)  # the band's continue smoothly just beyond it
         self.shape_basis = np.array([legendre.legval(x, np.eye(road_shape_terms + 2)[d])
                                      for d in range(2, road_shape_terms + 2)]).reshape(road_shape_terms, -1)
         self.min_noise_psd = np.zeros(self.k) if min_noise_psd is None else np.asarray(min_noise_psd, float)
@@ -113,39 +126,49 @@ class FullCarSpectrum:
         self.noise_slice = slice(self.n_params - self.k, self.n_params)
         self.shape_slice = slice(7, 7 + road_shape_terms)
         self.wheelbase_m = vehicle.wheelbase_m  # l_f's scale in θ: kept when the budget moves the vehicle
+        self._body_key: bytes | None = None  # _body_motion's cache
+        self._body_value: tuple[np.ndarray, ...] | None = None
         self.set_vehicle(vehicle)
 
     def subset(self, step: int, aliases: int | None = None) -> FullCarSpectrum:
-        """The same model (the same θ) at every ``step``-th frequency, optionally with fewer
-        aliasing terms."""
-        changes: dict[str, Any] = {"vehicle": self.vehicle}
+        """The same model (the same θ) at every ``step``-th frequency (S at each), optionally
+        with fewer aliasing terms."""
+        changes: dict[str, Any] = {"vehicle": self.vehicle, "grid_hz": 0.0}
         if aliases is not None:
             changes["aliases"] = aliases
         changes["kernel_m2_hz2"] = self._settings["kernel_m2_hz2"][::step]
         return FullCarSpectrum(freq_hz=self.freq_hz[::step], **(self._settings | changes))
+
+    def regrid(self, freq_hz: np.ndarray, kernel_m2_hz2: np.ndarray | float,
+               grid_hz: float) -> FullCarSpectrum:
+        """The same model (the same θ) at other frequencies."""
+        m2 = np.broadcast_to(np.asarray(kernel_m2_hz2, dtype=float), freq_hz.shape)
+        changes = {"vehicle": self.vehicle, "kernel_m2_hz2": m2, "grid_hz": grid_hz}
+        return FullCarSpectrum(freq_hz=freq_hz, **(self._settings | changes))
 
     def set_vehicle(self, vehicle: FullVehicle, channel_factor: np.ndarray | None = None) -> None:
         """(Re)compute what depends on the assumed vehicle and sensors; ``channel_factor``
         (k,) or (F, k) multiplies each channel's response (a sensor's gain or delay)."""
         v = self.vehicle = vehicle
         w = self.omega
-        corners = tuple(getattr(v, name) for name in _CORNER_FIELDS)
+        corners = corner_values(v)
         if corners != getattr(self, "_corners", None):  # the sensors alone moved: the corners stand
-            self._corners = corners
+            self._corners, self._body_key = corners, None
             Z, T = corner_matrices(v, 1j * w)  # (F, 4, 4) each
             B = np.column_stack([np.ones(4), -np.asarray(v.corner_x_m), np.asarray(v.corner_y_m)])
+            self._body_map = B
             self.body_stiffness = B.T @ Z @ B  # Bᵀ Z B
             self.body_input = B.T @ T  # Bᵀ T
+            phi = delay_characteristic(w, v.wheelbase_m, self.speed_mps)
+            mean_speed = float(np.mean(self.speed_mps))
+            self.x_coherence = 2.0 * np.pi * np.abs(w / (2.0 * np.pi)) / mean_speed * v.track_front_m
+            one = np.ones_like(phi)
+            self.delay = np.stack([one, phi.conj(), phi, one], axis=-1).reshape(-1, 2, 2)  # [[1, φ̄], [φ, 1]]
         xs, ys = np.asarray(v.sensor_x_m)[list(self.sensors)], np.asarray(v.sensor_y_m)[list(self.sensors)]
         P = np.column_stack([np.ones(self.k), -xs, ys])
         factor = np.ones((w.size, self.k)) if channel_factor is None else \
             np.broadcast_to(channel_factor, (w.size, self.k))
         self.sensing = 1j * w[:, None, None] * factor[:, :, None] * P[None]  # iω P, (F, k, 3)
-        phi = delay_characteristic(w, v.wheelbase_m, self.speed_mps)
-        mean_speed = float(np.mean(self.speed_mps))
-        self.x_coherence = 2.0 * np.pi * np.abs(w / (2.0 * np.pi)) / mean_speed * v.track_front_m
-        one = np.ones_like(phi)
-        self.delay = np.stack([one, phi.conj(), phi, one], axis=-1).reshape(-1, 2, 2)  # [[1, φ̄], [φ, 1]]
 
     # --- parameters -------------------------------------------------------------------
     def theta(self, params: np.ndarray, road: float, noise: np.ndarray) -> np.ndarray:
@@ -187,47 +210,91 @@ class FullCarSpectrum:
     def spectrum(self, theta: np.ndarray, derivatives: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """S (K, k, k) and, if asked, dS/dθ (n_params, K, k, k); NaN where θ overflows (every
         likelihood reads that as impossible)."""
+        S, dS = self.node_spectrum(theta, derivatives)
+        return self.to_targets(S), None if dS is None else self.to_targets(dS)
+
+    def to_targets(self, m: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """Stacked matrices at the nodes (..., nodes, k, k) -> the expectations at the model's
+        frequencies (..., K, k, k), or at ``rows`` of them only."""
+        if self._op is None:
+            return m if rows is None else m[..., rows, :, :]
+        if rows is None:
+            return apply(self._op, m)
+        key = rows.tobytes()
+        if key not in self._row_ops:
+            self._row_ops[key] = sparse.csr_array(self._op[rows])
+        return apply(self._row_ops[key], m)
+
+    def to_nodes(self, m: np.ndarray) -> np.ndarray:
+        """The adjoint of :meth:`to_targets`: ``Σ_k tr(W_k to_targets(X)_k) = Σ_n tr(to_nodes(W)_n X_n)``."""
+        return m if self._op_t is None else apply(self._op_t, m)
+
+    def node_spectrum(self, theta: np.ndarray,
+                      derivatives: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """As :meth:`spectrum`, S itself at the evaluation grid's nodes (``nodes_hz``)."""
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             S, dS = self._spectrum(theta, derivatives)
-        if self._average is not None:
-            S = self._average(S)
-            dS = None if dS is None else self._average(dS)
         if not (np.all(np.isfinite(S)) and (dS is None or np.all(np.isfinite(dS)))):
             S = np.full_like(S, np.nan)
             dS = None if dS is None else np.full_like(dS, np.nan)
         return S, dS
 
     def _spectrum(self, theta: np.ndarray, derivatives: bool) -> tuple[np.ndarray, np.ndarray | None]:
-        w2 = self.omega**2
-        M, dM = self._mass_matrix(theta)
-        Q = self.sensing @ np.linalg.inv(self.body_stiffness - w2[:, None, None] * M)  # iω P D⁻¹, (F, k, 3)
-        G = Q @ self.body_input  # (F, k, 4)
-        gamma, d_gamma = track_coherence(self.x_coherence * math.exp(theta[self.index["ln_coherence_scale"]]))
-        R = self._inputs(gamma)
-        shape = theta[self.shape_slice] @ self.shape_basis if self.shape_basis.size else 0.0
-        weight = np.exp(theta[5] + (2.0 - theta[6]) * self.log_shape + shape)
-        GR = G @ R
-        per_alias = weight[:, None, None] * (GR @ _h(G))  # (F, k, k)
+        sensing = self.sensing
+        inv_d, _, _, motion, d_motion = self._body_motion(theta)
+        per_alias = sensing @ motion @ _h(sensing)  # (F, k, k)
         S_road = self._fold(per_alias)
         noise = np.exp(theta[self.noise_slice])
         S = S_road + np.eye(self.k) * (noise + self.min_noise_psd)
         if not derivatives:
             return S, None
         dS = np.zeros((self.n_params, self.n_freq, self.k, self.k), dtype=complex)
-        # ∂D = -ω² ∂M: ∂G = ω² Q ∂M D⁻¹ Bᵀ T, so ∂(G R Gᴴ) = ω² Q ∂M Y + h.c. with Y = D⁻¹ Bᵀ T R Gᴴ
-        Y = np.linalg.solve(self.body_stiffness - w2[:, None, None] * M, self.body_input @ (R @ _h(G)))
-        part = np.einsum("fia,pab->pfib", (w2 * weight)[:, None, None] * Q, dM) @ Y
-        dS[:5] = part.reshape(5, self.n_alias, self.n_freq, self.k, self.k).sum(axis=1)
+        # ∂D = -ω² ∂M: ∂H = ω² D⁻¹ ∂M H, so ∂(P H R Hᴴ Pᴴ) = ω² P D⁻¹ ∂M (H R Hᴴ) Pᴴ + h.c.
+        _, dM = self._mass_matrix(theta)
+        Q = (self.omega**2)[:, None, None] * (sensing @ inv_d)
+        part = np.einsum("fia,pab->pfib", Q, dM) @ (motion @ _h(sensing))
+        dS[:5] = self._fold(part)
         dS[:5] += _h(dS[:5])
         dS[5] = S_road
         dS[6] = self._fold(-self.log_shape[:, None, None] * per_alias)
         for d, basis in enumerate(self.shape_basis):
             dS[7 + d] = self._fold(basis[:, None, None] * per_alias)
-        dR = self._inputs(d_gamma, diagonal=0.0)
-        dS[self.index["ln_coherence_scale"]] = self._fold(weight[:, None, None] * (G @ dR @ _h(G)))
+        dS[self.index["ln_coherence_scale"]] = self._fold(sensing @ d_motion @ _h(sensing))
         for i in range(self.k):
             dS[self.noise_slice.start + i, :, i, i] = noise[i]
         return S, dS
+
+    def corner_derivatives(self, theta: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """dS (G, K, k, k) at θ along ``directions`` (G, 22) of the corners' values
+        (:func:`~rozyn_estimator.method.full.fit.corner_matrix_derivatives`): ``D = Bᵀ Z B -
+        ω² M`` and ``Bᵀ T`` move, so ``dH = D⁻¹ (Bᵀ dT - Bᵀ dZ B H)``, and ``d(H R Hᴴ) = dH R Hᴴ
+        + h.c.`` — one batched pass instead of a model evaluation per value."""
+        inv_d, H, weighted_inputs, _, _ = self._body_motion(theta)
+        dZ, dT = corner_matrix_derivatives(self.vehicle, 1j * self.omega, directions)
+        B = self._body_map
+        dH = inv_d @ (B.T @ dT - (B.T @ dZ @ B) @ H)
+        part = self.sensing @ (dH @ weighted_inputs @ _h(H)) @ _h(self.sensing)
+        dS = self._fold(part + _h(part))
+        return self.to_targets(dS)
+
+    def _body_motion(self, theta: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(D⁻¹, ``H = D⁻¹ Bᵀ T`` (F, 3, 4) the body's response to the wheels' road, the road's
+        weighted inputs ``r σ² R``, the body's motion spectrum ``r σ² H R Hᴴ``, its derivative
+        in the coherence scale) at θ. Cached at the last θ: a sensor's move leaves it."""
+        key = theta[: self.noise_slice.start].tobytes()
+        if key == self._body_key and self._body_value is not None:
+            return self._body_value
+        M, _ = self._mass_matrix(theta)
+        inv_d = np.linalg.inv(self.body_stiffness - (self.omega**2)[:, None, None] * M)
+        H = inv_d @ self.body_input
+        gamma, d_gamma = track_coherence(self.x_coherence * math.exp(theta[self.index["ln_coherence_scale"]]))
+        shape = theta[self.shape_slice] @ self.shape_basis if self.shape_basis.size else 0.0
+        weight = np.exp(theta[5] + (2.0 - theta[6]) * self.log_shape + shape)[:, None, None]
+        inputs = weight * self._inputs(gamma)
+        motion = H @ inputs @ _h(H)
+        d_motion = H @ (weight * self._inputs(d_gamma, diagonal=0.0)) @ _h(H)
+        self._body_key, self._body_value = key, (inv_d, H, inputs, motion, d_motion)
+        return self._body_value
 
     def _inputs(self, gamma: np.ndarray, diagonal: float = 1.0) -> np.ndarray:
         """R (F, 4, 4): the wheels' road velocity covariance for the tracks' coherence γ."""
@@ -237,8 +304,16 @@ class FullCarSpectrum:
         return np.einsum("fab,fij->faibj", self.delay, track).reshape(-1, 4, 4)
 
     def _fold(self, m: np.ndarray) -> np.ndarray:
-        """(F, k, k) on the aliased grid summed over the aliases: (K, k, k)."""
-        return m.reshape(self.n_alias, self.n_freq, self.k, self.k).sum(axis=0)
+        """(..., F, k, k) at the band's nodes and the aliases' -> (..., nodes, k, k): the
+        aliases summed and interpolated to the band's nodes."""
+        out = m[..., : self.n_freq, :, :]
+        if not self.n_alias_terms:
+            return out
+        lead = m.shape[:-3]
+        shape = (*lead, self.n_alias_terms, self.n_alias_nodes, self.k, self.k)
+        aliased = m[..., self.n_freq:, :, :].reshape(shape)
+        total = aliased.sum(axis=-4)
+        return out + (total if self._alias_fold is None else self._alias_fold(total))
 
 
 def _h(m: np.ndarray) -> np.ndarray:
@@ -253,35 +328,3 @@ def expected_periodogram_m2(taper: np.ndarray, fs_hz: float) -> float:
     taper reaches zero at its ends). Tukey 0.2: 0.71 bin²."""
     w = np.asarray(taper, dtype=float)
     return float(np.sum(np.diff(np.r_[0.0, w, 0.0]) ** 2) / np.sum(w * w) / (4.0 * np.pi**2) * fs_hz**2)
-
-
-def _extended(freq_hz: np.ndarray) -> np.ndarray:
-    """``freq_hz`` with one more frequency beyond each end, at the end's own spacing."""
-    return np.r_[2 * freq_hz[0] - freq_hz[1], freq_hz, 2 * freq_hz[-1] - freq_hz[-2]]
-
-
-def _averaging(freq_hz: np.ndarray, m2_hz2: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-    """The map from S at ``freq_hz`` extended a step beyond each end (K + 2) to the expected
-    periodogram at ``freq_hz`` (K): ``S + m₂ S''/2`` with S'' the (non-uniform) second
-    difference. Its weights are kept non-negative (``m₂`` is about a tenth of the spacing's
-    square here; where it were more, the average is capped): a positive definite S stays one.
-
-    Why: the road drives the body's three motions through two processes (the tracks), so
-    the road's part of S is nearly rank 2 and the directions it nearly lacks turn with
-    frequency (the rear's delay, the resonances' phase). A periodogram averaged across that
-    turn (the taper's window, groups of bins) has power there that S lacks; with quiet
-    sensors the roll inertia absorbed it (+10-17 % at 100 km/h with 1 % noise)."""
-    step = np.diff(_extended(freq_hz))
-    h1, h2 = step[:-1], step[1:]
-    below, above = m2_hz2 / (h1 * (h1 + h2)), m2_hz2 / (h2 * (h1 + h2))
-    cap = np.minimum(1.0, 1.0 / np.maximum(below + above, 1e-300))
-    below, above = below * cap, above * cap
-    middle = 1.0 - below - above
-    shape = (-1,) + (1,) * 2
-
-    def average(s: np.ndarray) -> np.ndarray:
-        lead = s.ndim - 3  # dS carries the parameters first
-        b, a, c = (x.reshape((1,) * lead + shape) for x in (below, middle, above))
-        return b * s[..., :-2, :, :] + a * s[..., 1:-1, :, :] + c * s[..., 2:, :, :]
-
-    return average

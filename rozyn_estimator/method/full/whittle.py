@@ -17,10 +17,20 @@ import numpy as np
 
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 
+_HESSIAN_STEP = 3  # the optimiser's Fisher information: every 3rd frequency (class docstring)
+_HESSIAN_MIN = 300  # ... of models with at least this many frequencies
+
 
 class FullWhittle:
     """ℓ(θ), ∇ℓ and the Fisher information of a window's periodogram matrices (cached at the
     last θ).
+
+    The model is evaluated at its nodes and mapped to the periodograms' frequencies
+    (:meth:`FullCarSpectrum.to_targets`); the gradient maps back the other way (the map's
+    adjoint: one matrix per frequency instead of one per parameter), and the optimiser's
+    Hessian is the Fisher information summed over every ``_HESSIAN_STEP``-th frequency, each
+    standing for its neighbours (it is smooth in frequency: it shapes the steps, the gradient
+    decides where they end). The published Fisher information (:meth:`fisher`) is the whole sum.
 
     Args:
         model: the full car's spectral model at the periodograms' frequencies.
@@ -35,10 +45,15 @@ class FullWhittle:
         self.model, self.periodogram = model, periodogram
         self.counts = np.ones(periodogram.shape[0]) if counts is None else np.asarray(counts, dtype=float)
         self._root_counts = np.sqrt(self.counts)[:, None, None]
+        n = periodogram.shape[0]
+        self._sub = np.arange(0, n, _HESSIAN_STEP if n >= _HESSIAN_MIN else 1)
+        self._sub_root_counts = np.sqrt(np.add.reduceat(self.counts, self._sub))[:, None, None]
         self._key: bytes | None = None
         self._value: tuple[float, np.ndarray] = (math.inf, np.zeros(model.n_params))
+        self._state: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (S, dS at the nodes, L⁻¹)
+        self._dS: np.ndarray | None = None  # dS/dθ at the frequencies, when asked
         self._rows: np.ndarray | None = None
-        self._state: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (S, dS, L⁻¹)
+        self._hessian: np.ndarray | None = None
         self.evaluations = 0
 
     def nll(self, S: np.ndarray) -> float:
@@ -57,17 +72,17 @@ class FullWhittle:
         if key == self._key:
             return self._value
         self.evaluations += 1
-        S, dS = self.model.spectrum(theta)
+        S_nodes, dS = self.model.node_spectrum(theta)
         assert dS is not None
+        S = self.model.to_targets(S_nodes)
         linv = _inverse_cholesky(S)
-        self._key, self._rows = key, None
+        self._key, self._dS, self._rows, self._hessian = key, None, None, None
         if linv is None:
             self._state, self._value = None, (math.inf, np.zeros(self.model.n_params))
             return self._value
         inv = _h(linv) @ linv
-        W = self.counts[:, None, None] * (inv - inv @ self.periodogram @ inv)
-        grad = dS.reshape(dS.shape[0], -1) @ W.swapaxes(1, 2).ravel()  # Σ_k tr(W ∂S)
-        grad = grad.real
+        W = self.model.to_nodes(self.counts[:, None, None] * (inv - inv @ self.periodogram @ inv))
+        grad = (dS.reshape(dS.shape[0], -1) @ W.swapaxes(1, 2).ravel()).real  # Σ_k tr(W ∂S)
         self._state, self._value = (S, dS, linv), (self._nll(linv), grad)
         return self._value
 
@@ -78,17 +93,26 @@ class FullWhittle:
         return self.evaluate(theta)[1]
 
     def at(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(S, dS/dθ, L⁻¹) at θ (raises ValueError where S is not positive definite)."""
+        """(S, dS/dθ, L⁻¹) at θ and the periodograms' frequencies (raises ValueError where S is
+        not positive definite)."""
         self.evaluate(theta)
         if self._state is None:
             raise ValueError("the model is not positive definite at θ")
-        return self._state
+        S, dS_nodes, linv = self._state
+        if self._dS is None:
+            self._dS = self.model.to_targets(dS_nodes)
+        return S, self._dS, linv
 
-    def whitened(self, linv: np.ndarray, dS: np.ndarray) -> np.ndarray:
+    def whitened(self, linv: np.ndarray, dS: np.ndarray, root_counts: np.ndarray | None = None) -> np.ndarray:
         """(p, 2 K k²) real rows, ``√c L⁻¹ ∂S L⁻ᴴ``'s real and imaginary parts: ``a @ bᵀ`` is
         ``Σ c tr(W_a W_b)`` (a real matrix product: numpy's complex one with a conjugate
-        transpose is far slower)."""
-        W = (linv @ dS @ (_h(linv) * self._root_counts)).reshape(dS.shape[0], -1)
+        transpose is far slower). The parameters ride in the matrices' columns, so that numpy
+        multiplies one (k, p k) matrix per frequency, not p tiny ones (twice as fast)."""
+        p, K, k, _ = dS.shape
+        roots = self._root_counts if root_counts is None else root_counts
+        left = linv @ dS.transpose(1, 2, 0, 3).reshape(K, k, p * k)  # (K, a, (p, b)): L⁻¹ ∂S
+        both = left.reshape(K, k * p, k) @ (_h(linv) * roots)  # (K, (a, p), d)
+        W = both.reshape(K, k, p, k).transpose(2, 0, 1, 3).reshape(p, -1)
         return np.concatenate([W.real, W.imag], axis=1)
 
     def rows(self, theta: np.ndarray) -> np.ndarray:
@@ -106,14 +130,25 @@ class FullWhittle:
         rows = self.rows(theta)
         return rows @ rows.T
 
-    def decrement(self, theta: np.ndarray) -> float:
-        """The Newton decrement gᵀF⁻¹g (twice the ℓ a scoring step would still gain)."""
-        _, grad = self.evaluate(theta)
-        return float(grad @ np.linalg.solve(ridged(self.fisher(theta)), grad))
-
     def hess(self, theta: np.ndarray) -> np.ndarray:
-        """The optimiser's Hessian: the Fisher information (scoring) with a tiny ridge."""
-        return ridged(self.fisher(theta))
+        """The optimiser's Hessian: the Fisher information over every ``_HESSIAN_STEP``-th
+        frequency (class docstring; scoring), with a tiny ridge."""
+        self.evaluate(theta)
+        if self._state is None:
+            return np.eye(self.model.n_params)
+        if self._sub.size == self.counts.size:
+            return ridged(self.fisher(theta))
+        if self._hessian is None:
+            _, dS_nodes, linv = self._state
+            dS = self.model.to_targets(dS_nodes, self._sub)
+            rows = self.whitened(linv[self._sub], dS, self._sub_root_counts)
+            self._hessian = ridged(rows @ rows.T)
+        return self._hessian
+
+    def decrement(self, theta: np.ndarray) -> float:
+        """The Newton decrement gᵀH⁻¹g (twice the ℓ a scoring step would still gain)."""
+        _, grad = self.evaluate(theta)
+        return float(grad @ np.linalg.solve(self.hess(theta), grad))
 
 
 def ridged(m: np.ndarray) -> np.ndarray:

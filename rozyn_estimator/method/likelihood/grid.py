@@ -167,17 +167,23 @@ def _reduction(n_bins: int, kernel: tuple[float, ...], step: int) -> Reduction:
 
 
 def _lagrange(n_fine: int, step: int, n_nodes: int, points: int = 8) -> tuple[np.ndarray, np.ndarray]:
-    """Lagrange interpolation of degree ``points - 1`` from nodes at ``step`` spacing to every
-    fine bin: (first node (n_fine,), weights (n_fine, points)) over the ``points`` nearest
-    nodes (one-sided at the ends; exact at the nodes; the identity for ``step`` 1)."""
+    """Lagrange interpolation from nodes at ``step`` spacing to every fine bin
+    (:func:`lagrange_weights`; the identity for ``step`` 1)."""
     if step == 1:
         return np.arange(n_fine), np.ones((n_fine, 1))
+    return lagrange_weights(np.arange(n_fine) / step, n_nodes, points)
+
+
+def lagrange_weights(x: np.ndarray, n_nodes: int, points: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """Lagrange interpolation of degree ``points - 1`` from ``n_nodes`` equally spaced nodes
+    to the positions ``x`` (in node spacings from the first node): (first node (n,), weights
+    (n, points)) over the ``points`` nearest nodes (one-sided at the ends; exact at the nodes)."""
     points = min(points, n_nodes)
-    x = np.arange(n_fine) / step
+    x = np.asarray(x, dtype=float)
     first = np.clip(np.floor(x).astype(int) - (points // 2 - 1), 0, n_nodes - points)
     t = x - first  # position among the nodes first .. first + points - 1
     nodes = np.arange(points)
-    w = np.ones((n_fine, points))
+    w = np.ones((x.size, points))
     for j in nodes:
         for m in nodes[nodes != j]:
             w[:, j] *= (t - m) / (j - m)

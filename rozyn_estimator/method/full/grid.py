@@ -1,0 +1,103 @@
+"""Where the full car's spectrum is evaluated, and the linear map from there to what the
+likelihood compares with the periodogram: :func:`evaluation_map`.
+
+The likelihood compares each (mean) periodogram ordinate with its expectation, S smoothed by
+the taper's spectral window and the group's spread of bins: ``S + m₂ S''/2``
+(:func:`averaging_matrix`; :func:`rozyn_estimator.method.full.spectrum.expected_periodogram_m2`).
+
+Why a coarse grid. The model's cost is per frequency (and per aliasing term), and S is
+smooth on the scale of the band's bins (a body resonance spans ~60 bins of a 120 s window,
+the wheelbase delay's phase turns once over 10 Hz at 100 km/h). As for the half car
+(:mod:`rozyn_estimator.method.likelihood.grid`, which measured the error: 4e-5 of S at
+0.05 Hz spacing), S is evaluated at equally spaced nodes ``grid_hz`` apart and interpolated
+to the frequencies by Lagrange polynomials through the 8 nearest nodes; interpolation and
+smoothing are one sparse matrix, applied to S and to every derivative alike. Nearly
+noise-free data need S at every frequency (the fit checks; :mod:`.refine`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+from scipy import sparse
+
+from rozyn_estimator.method.likelihood.grid import lagrange_weights, map_bins
+
+ALIAS_STEP = 4  # the aliases' nodes: every 4th of the band's (0.2 Hz on the default grid)
+Linear = Callable[[np.ndarray], np.ndarray]  # stacked (..., F, k, k) -> (..., nodes, k, k)
+
+
+def evaluation_map(freq_hz: np.ndarray, m2_hz2: np.ndarray,
+                   grid_hz: float = 0.0) -> tuple[np.ndarray, sparse.csr_array | None]:
+    """(the frequencies S is evaluated at, the sparse map (K, nodes) from there to the
+    expectations at ``freq_hz``; None: the identity). ``m2_hz2`` (K,) each ordinate's
+    kernel's second moment; ``grid_hz`` the nodes' spacing (0, or not coarser than the
+    frequencies': S at each)."""
+    smooth = bool(np.any(m2_hz2 > 0)) and freq_hz.size > 1
+    targets = extended(freq_hz) if smooth else freq_hz
+    span = float(targets[-1] - targets[0])
+    n_nodes = max(8, math.ceil(span / grid_hz - 1e-9) + 1) if grid_hz > 0 else targets.size
+    if grid_hz <= 0 or n_nodes >= 0.75 * targets.size:
+        return targets, (averaging_matrix(freq_hz, m2_hz2) if smooth else None)
+    first, weights = lagrange_weights((targets - targets[0]) / grid_hz, n_nodes)
+    cols = first[:, None] + np.arange(weights.shape[1])
+    rows = np.repeat(np.arange(targets.size), weights.shape[1])
+    op = sparse.csr_array((weights.ravel(), (rows, cols.ravel())), shape=(targets.size, n_nodes))
+    if smooth:
+        op = sparse.csr_array(averaging_matrix(freq_hz, m2_hz2) @ op)
+    return targets[0] + grid_hz * np.arange(n_nodes), op
+
+
+def apply(op: sparse.csr_array, m: np.ndarray) -> np.ndarray:
+    """``op`` along the frequency axis (-3) of stacked matrices, contiguous."""
+    return np.ascontiguousarray(map_bins(op, m))
+
+
+def alias_map(nodes_hz: np.ndarray, step: int) -> tuple[np.ndarray, Linear | None]:
+    """(the aliasing terms' base frequencies: every ``step``-th of the equally spaced
+    ``nodes_hz``, the last at or beyond the end; the interpolation from there to the nodes,
+    None for ``step`` 1: the nodes themselves). The aliases (``f ± fs``, above 85 Hz at
+    100 Hz) are smoother still than the band, and carry a few per mille of its power."""
+    n = nodes_hz.size
+    n_alias = max(8, math.ceil((n - 1) / step) + 1) if step > 1 else n
+    if step <= 1 or n_alias >= n:
+        return nodes_hz, None
+    first, weights = lagrange_weights(np.arange(n) / step, n_alias)
+    cols = first[:, None] + np.arange(weights.shape[1])
+    rows = np.repeat(np.arange(n), weights.shape[1])
+    op = sparse.csr_array((weights.ravel(), (rows, cols.ravel())), shape=(n, n_alias))
+    spacing = (nodes_hz[-1] - nodes_hz[0]) / (n - 1)
+    return nodes_hz[0] + step * spacing * np.arange(n_alias), lambda s: apply(op, s)
+
+
+def extended(freq_hz: np.ndarray) -> np.ndarray:
+    """``freq_hz`` with one more frequency beyond each end, at the end's own spacing."""
+    return np.r_[2 * freq_hz[0] - freq_hz[1], freq_hz, 2 * freq_hz[-1] - freq_hz[-2]]
+
+
+def _weights(freq_hz: np.ndarray, m2_hz2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(below, middle, above): each expectation's weights on S a step below, at and above."""
+    step = np.diff(extended(freq_hz))
+    h1, h2 = step[:-1], step[1:]
+    below, above = m2_hz2 / (h1 * (h1 + h2)), m2_hz2 / (h2 * (h1 + h2))
+    cap = np.minimum(1.0, 1.0 / np.maximum(below + above, 1e-300))
+    below, above = below * cap, above * cap
+    return below, 1.0 - below - above, above
+
+
+def averaging_matrix(freq_hz: np.ndarray, m2_hz2: np.ndarray) -> sparse.csr_array:
+    """The map (K, K + 2) from S at ``freq_hz`` extended a step beyond each end to the
+    expected periodogram at ``freq_hz``: ``S + m₂ S''/2`` with S'' the (non-uniform) second
+    difference. Its weights are kept non-negative (``m₂`` is about a tenth of the spacing's
+    square here; where it were more, the average is capped): a positive definite S stays one.
+
+    Why: the road drives the body's three motions through two processes (the tracks), so
+    the road's part of S is nearly rank 2 and the directions it nearly lacks turn with
+    frequency (the rear's delay, the resonances' phase). A periodogram averaged across that
+    turn (the taper's window, groups of bins) has power there that S lacks; with quiet
+    sensors the roll inertia absorbed it (+10-17 % at 100 km/h with 1 % noise)."""
+    below, middle, above = _weights(freq_hz, m2_hz2)
+    k = freq_hz.size
+    return sparse.csr_array(sparse.diags_array([below, middle, above], offsets=[0, 1, 2], shape=(k, k + 2)))
