@@ -116,15 +116,17 @@ def test_the_corner_matrices_derivatives_are_their_slopes():
 
 
 def test_the_analytic_contributions_are_the_differences(monkeypatch):
-    """The corners' values' contributions by the analytic derivatives equal those by moving the
-    vehicle a small step (the sensors' and the geometry's are differences either way)."""
+    """The corners' values' and the sensors' contributions by analytic derivatives equal
+    those by moving the vehicle a small step (the geometry's are differences either way)."""
     y, v = _window(6)
     vehicle = BARS  # its bars carry their default tolerances
     analytic = estimate_full(y, 100.0, vehicle, PipelineConfig(), v).refinement
     monkeypatch.setattr(refine_budget, "_corner_direction", lambda *_: None)
+    monkeypatch.setattr(refine_budget, "_sensor_change", lambda *_: None)
     stepped = estimate_full(y, 100.0, vehicle, PipelineConfig(), v).refinement
     assert analytic is not None and stepped is not None
-    assert "anti_roll_stiffness_front_nmprad" in analytic.contributions
+    assert {"anti_roll_stiffness_front_nmprad", "sensor_time_offset_s", "sensor_gain_rear[rear_left]",
+            "sensor_lateral_m[front_right]"} <= analytic.contributions.keys()
     assert analytic.contributions.keys() == stepped.contributions.keys()
     a, b = np.array(list(analytic.contributions.values())), np.array(list(stepped.contributions.values()))
     assert np.all(np.abs(a - b) <= 1e-3 * np.abs(b).max(axis=0)), np.abs(a - b) / np.abs(b).max(axis=0)

@@ -33,6 +33,7 @@ from rozyn_estimator.method.full.spectrum import FullCarSpectrum, corner_values
 from rozyn_estimator.method.full.whittle import FullWhittle
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
 
+_SENSOR_FIELDS = ("sensor_x_m", "sensor_y_m")
 # a move: the step -> (the vehicle moved, a factor per channel (F, k) or None)
 Move = Callable[[float], tuple[FullVehicle, np.ndarray | None]]
 
@@ -54,6 +55,11 @@ def refinement_contributions(objective: FullWhittle, theta: np.ndarray, theta_co
     if corner_moves:
         derivatives = model.corner_derivatives(theta, np.array([d for _, d in corner_moves]))
         changes.update(zip([name for name, _ in corner_moves], derivatives, strict=True))
+    sensor_moves = [(m[0], d) for m in moves if m[0] not in changes
+                    and (d := _sensor_change(model, vehicle, *m[2], m[1])) is not None]
+    if sensor_moves:
+        derivatives = model.sensing_derivatives(theta, np.array([d for _, d in sensor_moves]))
+        changes.update(zip([name for name, _ in sensor_moves], derivatives, strict=True))
     try:
         for name, step, (moved, factor), _ in moves:
             if name not in changes:
@@ -79,6 +85,16 @@ def _corner_direction(base: FullVehicle, moved: FullVehicle, factor: np.ndarray 
         return None
     return np.concatenate([np.ravel(getattr(moved, f)) - np.ravel(getattr(base, f))
                            for f in CORNER_VALUES]) / step
+
+
+def _sensor_change(model: FullCarSpectrum, base: FullVehicle, moved: FullVehicle, factor: np.ndarray | None,
+                   step: float) -> np.ndarray | None:
+    """(F, k, 3) the move's change of the sensing per unit step, or None when it moves
+    anything but the sensors' positions (and their channels' factors)."""
+    if any(getattr(moved, f.name) is not getattr(base, f.name) for f in dataclasses.fields(base)
+           if f.name not in _SENSOR_FIELDS):
+        return None
+    return (model.sensing_of(moved, factor) - model.sensing) / step
 
 
 def _moves(v: FullVehicle, model: FullCarSpectrum, key: str) -> list[tuple[str, float, Move]]:

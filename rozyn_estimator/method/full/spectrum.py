@@ -164,11 +164,17 @@ class FullCarSpectrum:
             self.x_coherence = 2.0 * np.pi * np.abs(w / (2.0 * np.pi)) / mean_speed * v.track_front_m
             one = np.ones_like(phi)
             self.delay = np.stack([one, phi.conj(), phi, one], axis=-1).reshape(-1, 2, 2)  # [[1, φ̄], [φ, 1]]
+        self.sensing = self.sensing_of(v, channel_factor)
+
+    def sensing_of(self, v: FullVehicle, channel_factor: np.ndarray | None = None) -> np.ndarray:
+        """iω P (F, k, 3): the sensors' accelerations from the body's velocities (q̇), each
+        channel times its ``channel_factor`` (k,) or (F, k)."""
+        w = self.omega
         xs, ys = np.asarray(v.sensor_x_m)[list(self.sensors)], np.asarray(v.sensor_y_m)[list(self.sensors)]
         P = np.column_stack([np.ones(self.k), -xs, ys])
         factor = np.ones((w.size, self.k)) if channel_factor is None else \
             np.broadcast_to(channel_factor, (w.size, self.k))
-        self.sensing = 1j * w[:, None, None] * factor[:, :, None] * P[None]  # iω P, (F, k, 3)
+        return 1j * w[:, None, None] * factor[:, :, None] * P[None]
 
     # --- parameters -------------------------------------------------------------------
     def theta(self, params: np.ndarray, road: float, noise: np.ndarray) -> np.ndarray:
@@ -276,6 +282,14 @@ class FullCarSpectrum:
         part = self.sensing @ (dH @ weighted_inputs @ _h(H)) @ _h(self.sensing)
         dS = self._fold(part + _h(part))
         return self.to_targets(dS)
+
+    def sensing_derivatives(self, theta: np.ndarray, d_sensing: np.ndarray) -> np.ndarray:
+        """dS (G, K, k, k) at θ for changes ``d_sensing`` (G, F, k, 3) of :meth:`sensing_of`
+        (a sensor's position, gain or timing): S is ``P_s (H R Hᴴ) P_sᴴ`` and the body's
+        motion stays."""
+        _, _, _, motion, _ = self._body_motion(theta)
+        part = d_sensing @ (motion @ _h(self.sensing))
+        return self.to_targets(self._fold(part + _h(part)))
 
     def _body_motion(self, theta: np.ndarray) -> tuple[np.ndarray, ...]:
         """(D⁻¹, ``H = D⁻¹ Bᵀ T`` (F, 3, 4) the body's response to the wheels' road, the road's
