@@ -152,10 +152,11 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     power = band_power(spectra)
     freq, periodogram, counts = _grouped(spectra.freq_hz, spectra.periodogram,
                                          max(1, int(_GROUP_HZ * y.shape[0] / fs + 1e-9)))
+    kernel = _kernel_m2(y.shape[0], fs, cfg.taper, counts)
     model = FullCarSpectrum(vehicle, sensors, freq, fs, v if v.size > 1 else float(v[0]),
                             cfg.aliases, f_ref_hz=math.sqrt(band[0] * band[1]),
                             road_shape_terms=cfg.road_shape_terms, min_noise_psd=_MIN_NOISE * power,
-                            kernel_m2_hz2=_kernel_m2(y.shape[0], fs, cfg.taper, counts),
+                            kernel_m2_hz2=kernel,
                             grid_hz=0.0 if _noise_free(warm, power) else cfg.grid_hz)
     objective = FullWhittle(model, periodogram, counts)
     best: OptimizeResult | None = None
@@ -193,7 +194,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     if best is not None and model.grid_hz > 0 and _noise_share(best.x, model, power).min() < NOISE_AT_ZERO:
         # nearly noise-free: S is nearly singular and the interpolation's small errors matter
         found, best = best.x, None
-        model = model.subset(1)
+        model = model.regrid(freq, kernel, 0.0)
         objective = FullWhittle(model, periodogram, counts)
         run(found, max(1, cfg.max_iter - iterations))
     if best is not None and objective.decrement(best.x) >= cfg.tol and iterations < cfg.max_iter:

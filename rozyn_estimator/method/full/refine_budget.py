@@ -4,10 +4,11 @@ An assumed value ``β`` off by ``δ`` moves the likelihood's optimum by
 ``dθ̂ = -F⁻¹ F_θβ δ``, ``F_θβ = Σ_k tr(S⁻¹ ∂_θ S S⁻¹ ∂_β S)`` the information shared between the
 fitted parameters and ``β`` (the expected score's slope in ``β``: the fit absorbs what it can
 of the changed spectrum into θ, the nuisances included). ``∂_β S``: for the corners' values
-(springs, dampers, tyres, unsprung masses, bars) the model's analytic derivative
-(:meth:`~rozyn_estimator.method.full.spectrum.FullCarSpectrum.corner_derivatives`, all in one
-pass); for the geometry and the sensors the model's change with the value moved a small
-step. Per toleranced value: that move times its tolerance,
+(springs, dampers, tyres, unsprung masses, bars) and the sensors' positions, gains and
+timing the model's analytic derivatives (:class:`~rozyn_estimator.method.full.spectrum.
+FullCarSpectrum`'s ``corner_derivatives`` and ``sensing_derivatives``, each in one pass);
+for the geometry (wheelbase, tracks) the model's change with the value moved a small step.
+Per toleranced value: that move times its tolerance,
 mapped to ``(m, I_xx, I_yy, l_f, y_c)``. The keys follow the Rozyn stage's budget
 (:mod:`rozyn_estimator.method.full.budget`): an axle's share applies to both its corners,
 a sensor's position or gain to each sensor on its own (independent errors: one
@@ -15,9 +16,8 @@ contribution each), the time offset to the rear sensors against the front ones.
 
 Work: ``F_θβ`` is taken where the fit's Fisher information is (its whitened rows are reused,
 and all moves are whitened in one pass); each stepped move is one evaluation of S without
-derivatives on the model's evaluation grid (:mod:`.grid`). The sensors' moves leave the
-corners' matrices and the body's motion as they are (cached): they go first, and cost a
-fifth of a geometry's move. Measured: the budget of a cold update from 76 ms to about 25.
+derivatives on the model's evaluation grid (:mod:`.grid`). Measured: the budget of a cold
+update from 76 ms to about 20.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import numpy as np
 
 from rozyn_estimator.method.full.budget import ABS_STEP, AXLE, VehicleMove, moved_copy, vehicle_moves
 from rozyn_estimator.method.full.fit import CORNER_VALUES
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum, corner_values
+from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.full.whittle import FullWhittle
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
 
@@ -48,8 +48,6 @@ def refinement_contributions(objective: FullWhittle, theta: np.ndarray, theta_co
     moves = [(name, step, move(step), tol) for key, tol in vehicle.tolerances.to_dict().items() if tol > 0
              for name, step, move in _moves(vehicle, model, key)]
     order = [name for name, *_ in moves]
-    home = corner_values(vehicle)
-    moves.sort(key=lambda m: corner_values(m[2][0]) != home)  # the sensors' first (module docstring)
     changes: dict[str, np.ndarray] = {}  # name -> dS along the move, per unit step
     corner_moves = [(m[0], d) for m in moves if (d := _corner_direction(vehicle, *m[2], m[1])) is not None]
     if corner_moves:
@@ -79,9 +77,8 @@ def _corner_direction(base: FullVehicle, moved: FullVehicle, factor: np.ndarray 
                       step: float) -> np.ndarray | None:
     """(22,) the move's change of the corners' values per unit step
     (:data:`~rozyn_estimator.method.full.fit.CORNER_VALUES`), or None when it moves anything
-    else (the geometry, a sensor: its dS by a difference)."""
-    if factor is not None or any(getattr(moved, f.name) is not getattr(base, f.name)
-                                 for f in dataclasses.fields(base) if f.name not in CORNER_VALUES):
+    else."""
+    if factor is not None or not _moves_only(base, moved, CORNER_VALUES):
         return None
     return np.concatenate([np.ravel(getattr(moved, f)) - np.ravel(getattr(base, f))
                            for f in CORNER_VALUES]) / step
@@ -91,10 +88,15 @@ def _sensor_change(model: FullCarSpectrum, base: FullVehicle, moved: FullVehicle
                    step: float) -> np.ndarray | None:
     """(F, k, 3) the move's change of the sensing per unit step, or None when it moves
     anything but the sensors' positions (and their channels' factors)."""
-    if any(getattr(moved, f.name) is not getattr(base, f.name) for f in dataclasses.fields(base)
-           if f.name not in _SENSOR_FIELDS):
+    if not _moves_only(base, moved, _SENSOR_FIELDS):
         return None
     return (model.sensing_of(moved, factor) - model.sensing) / step
+
+
+def _moves_only(base: FullVehicle, moved: FullVehicle, names: tuple[str, ...]) -> bool:
+    """``moved`` (a :func:`moved_copy` of ``base``) holds ``base``'s own values but ``names``."""
+    return all(getattr(moved, f.name) is getattr(base, f.name) for f in dataclasses.fields(base)
+               if f.name not in names)
 
 
 def _moves(v: FullVehicle, model: FullCarSpectrum, key: str) -> list[tuple[str, float, Move]]:

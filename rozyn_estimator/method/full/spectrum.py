@@ -50,11 +50,6 @@ _CORNER_FIELDS = ("wheelbase_m", "track_front_m", "track_rear_m", "unsprung_mass
 BODY_NAMES = ("ln_mass", "ln_roll_inertia", "ln_pitch_inertia", "logit_cog", "cog_lateral_m")
 
 
-def corner_values(v: FullVehicle) -> tuple[Any, ...]:
-    """What the corners' matrices, the rear's delay and the tracks' coherence depend on."""
-    return tuple(getattr(v, name) for name in _CORNER_FIELDS)
-
-
 def track_coherence(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(γ, dγ/dc) of the isotropic surface for ``w = 2`` at ``x = 2π n B e^c``:
     ``γ = x K₁(x)`` and, as ``d(x K₁)/dx = -x K₀``, ``dγ/dc = -x² K₀(x)``."""
@@ -94,7 +89,7 @@ class FullCarSpectrum:
         self.freq_hz = freq_hz
         edges_hz = shape_edges_hz or (float(freq_hz.min()), float(freq_hz.max()))
         m2 = np.broadcast_to(np.asarray(kernel_m2_hz2, dtype=float), freq_hz.shape)
-        self._settings: dict[str, Any] = dict(  # what subset() rebuilds the model from
+        self._settings: dict[str, Any] = dict(  # what regrid() rebuilds the model from
             vehicle=vehicle, sensors=sensors, fs_hz=fs_hz, speed_mps=speed_mps, aliases=aliases,
             f_ref_hz=f_ref_hz, road_shape_terms=road_shape_terms, min_noise_psd=min_noise_psd,
             shape_edges_hz=edges_hz, kernel_m2_hz2=m2, grid_hz=grid_hz)
@@ -107,7 +102,6 @@ class FullCarSpectrum:
         alias_nodes, self._alias_fold = alias_map(nodes, ALIAS_STEP if self.grid_hz > 0 else 1)
         shifts = np.array([a for a in range(-aliases, aliases + 1) if a != 0], dtype=float) * fs_hz
         self.n_freq, self.n_alias_terms, self.n_alias_nodes = nodes.size, shifts.size, alias_nodes.size
-        self.nodes_hz = nodes
         f = np.r_[nodes, (alias_nodes[None, :] + shifts[:, None]).ravel()]  # the band's nodes, then aliases'
         self.omega = 2.0 * np.pi * f
         self.speed_mps = speed_mps
@@ -130,18 +124,9 @@ class FullCarSpectrum:
         self._body_value: tuple[np.ndarray, ...] | None = None
         self.set_vehicle(vehicle)
 
-    def subset(self, step: int, aliases: int | None = None) -> FullCarSpectrum:
-        """The same model (the same θ) at every ``step``-th frequency (S at each), optionally
-        with fewer aliasing terms."""
-        changes: dict[str, Any] = {"vehicle": self.vehicle, "grid_hz": 0.0}
-        if aliases is not None:
-            changes["aliases"] = aliases
-        changes["kernel_m2_hz2"] = self._settings["kernel_m2_hz2"][::step]
-        return FullCarSpectrum(freq_hz=self.freq_hz[::step], **(self._settings | changes))
-
     def regrid(self, freq_hz: np.ndarray, kernel_m2_hz2: np.ndarray | float,
                grid_hz: float) -> FullCarSpectrum:
-        """The same model (the same θ) at other frequencies."""
+        """The same model (the same θ) at other frequencies (``grid_hz`` 0: S at each)."""
         m2 = np.broadcast_to(np.asarray(kernel_m2_hz2, dtype=float), freq_hz.shape)
         changes = {"vehicle": self.vehicle, "kernel_m2_hz2": m2, "grid_hz": grid_hz}
         return FullCarSpectrum(freq_hz=freq_hz, **(self._settings | changes))
@@ -151,7 +136,7 @@ class FullCarSpectrum:
         (k,) or (F, k) multiplies each channel's response (a sensor's gain or delay)."""
         v = self.vehicle = vehicle
         w = self.omega
-        corners = corner_values(v)
+        corners = tuple(getattr(v, name) for name in _CORNER_FIELDS)
         if corners != getattr(self, "_corners", None):  # the sensors alone moved: the corners stand
             self._corners, self._body_key = corners, None
             Z, T = corner_matrices(v, 1j * w)  # (F, 4, 4) each
@@ -237,7 +222,7 @@ class FullCarSpectrum:
 
     def node_spectrum(self, theta: np.ndarray,
                       derivatives: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
-        """As :meth:`spectrum`, S itself at the evaluation grid's nodes (``nodes_hz``)."""
+        """As :meth:`spectrum`, S itself at the evaluation grid's nodes."""
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             S, dS = self._spectrum(theta, derivatives)
         if not (np.all(np.isfinite(S)) and (dS is None or np.all(np.isfinite(dS)))):
