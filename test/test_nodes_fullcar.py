@@ -209,8 +209,8 @@ def test_signals_stop_the_full_car_nodes_cleanly_with_a_valid_bag(tmp_path):
         with ros_session(DOMAIN + 1) as probe:
             probe.probe.create_subscription(InertiaStamped, "inertia", got.append, 10)
             deadline = time.monotonic() + 90
-            while time.monotonic() < deadline and not got:
-                probe.spin_until(lambda: got, 0.5)
+            while time.monotonic() < deadline and len(got) < 2:
+                probe.spin_until(lambda: len(got) >= 2, 0.5)
                 assert all(p.poll() is None for p in procs.values()), "a node died"
     finally:
         for name, proc in procs.items():
@@ -222,8 +222,16 @@ def test_signals_stop_the_full_car_nodes_cleanly_with_a_valid_bag(tmp_path):
         assert proc.returncode == 0, (name, err[-2000:])
         assert "Traceback" not in out + err, name
     counts = check_bag(tmp_path / "bag")
-    assert all(counts[f"/accel/{c}"] > 1000 for c in CORNERS), counts
     assert counts.get("/inertia", 0) >= 1, counts
+    # The sim waits for one subscriber per topic (the estimator's): the recorder, which learns
+    # the topics from the estimator, may join seconds later. From then on nothing is lost.
+    stamps: dict[str, list[int]] = {f"/accel/{c}": [] for c in CORNERS}
+    with AnyReader([tmp_path / "bag"]) as reader:
+        for conn, t, _ in reader.messages([c for c in reader.connections if c.topic in stamps]):
+            stamps[conn.topic].append(t)
+    for topic, times in stamps.items():
+        span_s = (max(times) - min(times)) * 1e-9 if times else 0.0
+        assert span_s > 4.0 and len(times) >= 0.99 * span_s * 100.0, (topic, len(times), span_s, counts)
     with open_bag(tmp_path / "bag") as reader:
         config = EstimatorConfig.from_json(reader.custom_data[CUSTOM_DATA_KEY])
     assert config.full_vehicle == load_full_vehicle(FULL_FILE)
