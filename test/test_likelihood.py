@@ -186,7 +186,8 @@ def test_score_covariance_equals_the_double_sum_over_bins(duration_s, grid_step,
 def test_model_on_a_coarse_grid_equals_the_model_at_every_bin(speed_kmh):
     """Evaluated every 6th bin of a 120 s window (0.05 Hz) and interpolated, the tapered model
     and its derivatives equal the model evaluated at every bin (to 1e-4 of S), also at a low
-    speed (the cross-spectrum's phase turning once per 0.36 Hz)."""
+    speed (the cross-spectrum's phase turning once per 0.36 Hz); so does S without the taper's
+    smoothing at every bin of the extended grid (``fine_spectrum``)."""
     f = np.arange(60, 1801) / 120.0
     weights = window_spectra(np.random.default_rng(0).standard_normal((12000, 2)), 100.0, (0.5, 15.0),
                              0.2).window_weights
@@ -198,6 +199,10 @@ def test_model_on_a_coarse_grid_equals_the_model_at_every_bin(speed_kmh):
     scale = np.abs(S0).max(axis=(1, 2))[:, None, None]
     assert np.max(np.abs(S1 - S0) / scale) < 1e-4
     assert np.max(np.abs(dS1 - dS0) / scale[None]) < 1e-3 * np.max(np.abs(dS0) / scale[None])
+    # unsmoothed at every bin of the extended grid (the score covariance's): interpolated only
+    fine0, fine1 = exact.fine_spectrum(theta), coarse.fine_spectrum(theta)
+    assert fine0.shape == fine1.shape == (exact.n_ext, 2, 2)
+    assert np.max(np.abs(fine1 - fine0) / np.abs(fine0).max(axis=(1, 2))[:, None, None]) < 1e-4
 
 
 def test_refinement_on_the_coarse_grid_matches_every_bin(window):

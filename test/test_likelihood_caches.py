@@ -3,7 +3,7 @@ window's values to another: every cached result equals the one computed afresh.
 
 Consecutive online windows share their length once the window is full; while it grows, and
 on sensors whose stamps jitter, the length changes from one update to the next. The
-taper and its DFT (``spectra``), the evaluation grid and its sparse map (``grid``) and the
+taper and its DFT (``spectra``), the evaluation grid and its sparse maps (``grid``) and the
 score's weights (``objective``) are cached; these tests interleave windows of other
 lengths, rates, tapers, model settings and vehicles (wheelbase, sensor positions), then
 compare every result with the same computation on empty caches, bit for bit. A warm update
@@ -53,7 +53,7 @@ CASES = [
 
 
 def _clear() -> None:
-    for cached in (grid._grid, grid._reduction, spectra._taper, covariance._partition):
+    for cached in (grid._grid, grid._reduction, grid.interpolation, spectra._taper, covariance._partition):
         cached.cache_clear()
 
 

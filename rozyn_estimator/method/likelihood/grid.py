@@ -166,6 +166,17 @@ def _reduction(n_bins: int, kernel: tuple[float, ...], step: int) -> Reduction:
     return Reduction(step, to_bins, sparse.csr_array(to_bins.T))
 
 
+@lru_cache(maxsize=16)
+def interpolation(n_ext: int, step: int) -> sparse.csr_array:
+    """The sparse map from the evaluation grid's nodes (every ``step``-th of ``n_ext`` bins)
+    to every bin of the extended grid, by the Lagrange polynomials alone (no smoothing)."""
+    n_nodes = node_count(n_ext, step)
+    first, weights = _lagrange(n_ext, step, n_nodes)
+    cols = first[:, None] + np.arange(weights.shape[1])
+    return sparse.csr_array((weights.ravel(), cols.ravel(), np.arange(0, weights.size + 1, weights.shape[1])),
+                            shape=(n_ext, n_nodes))
+
+
 def _lagrange(n_fine: int, step: int, n_nodes: int, points: int = 8) -> tuple[np.ndarray, np.ndarray]:
     """Lagrange interpolation from nodes at ``step`` spacing to every fine bin
     (:func:`lagrange_weights`; the identity for ``step`` 1)."""

@@ -43,7 +43,13 @@ import numpy as np
 from scipy import special
 
 from rozyn_estimator.method.likelihood.corners import CORNERS, CornerState, corner_outer, sensor_dg
-from rozyn_estimator.method.likelihood.grid import Reduction, evaluation_grid, reduction
+from rozyn_estimator.method.likelihood.grid import (
+    Reduction,
+    evaluation_grid,
+    interpolation,
+    map_bins,
+    reduction,
+)
 from rozyn_estimator.method.likelihood.road_input import delay_characteristic
 from rozyn_estimator.vehicle import Vehicle
 
@@ -106,7 +112,6 @@ class HalfCarSpectrum:
         self.omega, self.log_shape, self.shape_basis = at.omega, at.log_shape, at.shape_basis
         self.grid_step = grid_step
         self._reduction: Reduction | None = None  # the sparse map to the bins: built when first used
-        self._fine: HalfCarSpectrum | None = None  # the model at every bin (fine_spectrum)
         self.speed_mps = speed_mps
         self.rear_factor: np.ndarray | None = None  # assumed rear gain and delay (None: ideal)
         self.set_vehicle(vehicle)
@@ -361,14 +366,11 @@ class HalfCarSpectrum:
         return self._reduction
 
     def fine_spectrum(self, theta: np.ndarray) -> np.ndarray:
-        """S at every bin of the extended grid (k + 2J, 2, 2), unsmoothed, not interpolated
-        (nearly noise-free, S is nearly singular: an interpolation's error could make it indefinite)."""
-        if self.grid_step == 1:
-            return self.spectrum(theta, derivatives=False, smooth=False)[0]
-        if self._fine is None:
-            self._fine = self.variant(grid_step=1)
-        self._fine.rear_factor = self.rear_factor
-        return self._fine.spectrum(theta, derivatives=False, smooth=False)[0]
+        """S at every bin of the extended grid (k + 2J, 2, 2), unsmoothed: interpolated from
+        the evaluation grid's nodes (within 1e-4 of S; nearly noise-free data, where S is
+        nearly singular and that error could matter, are fitted with a node at every bin)."""
+        S = self.spectrum(theta, derivatives=False, smooth=False)[0]
+        return S if self.grid_step == 1 else map_bins(interpolation(self.n_ext, self.grid_step), S)
 
     @staticmethod
     def _diagonal(m: np.ndarray) -> np.ndarray:
