@@ -8,7 +8,9 @@ The simulator (``config/sim.yaml``, on sim time at ``real_time_factor`` times re
 starting once its accelerometer topics are subscribed) drives a half car over the chosen
 road (``model:=full``: the full car of ``config/vehicle_full.yaml``, or of any vehicle file
 that says ``model: full``, with four corner accelerometers); the estimator
-(``config/estimator.yaml``) uses the same vehicle file and the sim's speed. Unlike ``rozyn
+(``config/estimator.yaml``) uses the same vehicle file and the sim's speed; with
+``record:=true`` the sim starts once the recorder has subscribed too, so ``rozyn replay``
+of the bag reproduces the estimates. Unlike ``rozyn
 demo`` (one process, paced by what the estimator takes in), these are separate processes
 without flow control: the default 5x leaves the estimator time for every update on two
 cores (at 20x here it skipped updates and lost 14 % of the samples to a saturated CPU).
@@ -73,6 +75,10 @@ def generate_launch_description() -> LaunchDescription:
                 "real_time_factor": ParameterValue(arg("real_time_factor"), value_type=float),
                 "vehicle_file": vehicle,
                 "vehicle.model": model,
+                # recording: the sim starts once the recorder subscribed too (the bag then holds
+                # every sample the estimator saw, and rozyn replay reproduces its estimates)
+                "subscribers_per_topic": ParameterValue(
+                    PythonExpression(["2 if '", arg("record"), "' == 'true' else 1"]), value_type=int),
             },
         ],
     )

@@ -78,6 +78,10 @@ class SimNodeOptions:
     exit_when_done: bool = param(True, "shut down when duration_s has been simulated", read_only=True)
     wait_for_subscribers: bool = param(False, "start only once every accelerometer topic has a subscriber "
                                        "(so a run on sim time loses nothing to discovery)", read_only=True)
+    subscribers_per_topic: int = param(1, "with wait_for_subscribers: the subscribers each accelerometer "
+                                       "topic needs first (2: the estimator and a recorder, so the bag "
+                                       "holds every sample the estimator saw)", low=1, high=100,
+                                       read_only=True)
 
     def __post_init__(self) -> None:
         check(self)
@@ -193,12 +197,13 @@ class SimNode(Node):
         return n
 
     def _waiting(self) -> bool:
-        """Hold the start until both accel topics are subscribed, if asked to."""
+        """Hold the start until every accel topic has its subscribers, if asked to."""
         if not self.options.wait_for_subscribers or self.published:
             return False
-        missing = [pub.topic_name for pub in self._pub if pub.get_subscription_count() == 0]
+        wanted = self.options.subscribers_per_topic
+        missing = [pub.topic_name for pub in self._pub if pub.get_subscription_count() < wanted]
         if missing:
-            self.get_logger().info(f"waiting for a subscriber on {', '.join(missing)}", once=True)
+            self.get_logger().info(f"waiting for {wanted} subscriber(s) on {', '.join(missing)}", once=True)
             return True
         if not self._sim_mode:
             self._epoch_ns = self.get_clock().now().nanoseconds

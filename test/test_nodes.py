@@ -24,7 +24,7 @@ from geometry_msgs.msg import InertiaStamped
 from rclpy.context import Context
 from rclpy.experimental import EventsExecutor
 from rclpy.parameter import Parameter
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from ros_helpers import domain, ros_fixture
 
 DOMAIN = domain("nodes")  # and the next few: this module's private ROS domains
@@ -93,6 +93,26 @@ def test_sim_and_estimator_in_one_process(ros):
     assert status.level in (b"\x00", b"\x01") and values["dropped_total"] == "0", (status.message, values)
     assert float(values["mass_kg"]) == pytest.approx(last.inertia.m, rel=1e-5)
     assert {"mode1_freq_hz", "mode2_damping", "window_fill_pct", "pipeline_ms", "speed_mps"} <= set(values)
+
+
+def test_the_sim_waits_for_as_many_subscribers_as_asked(ros):
+    """With a recorder beside the estimator (``subscribers_per_topic`` 2) the sim holds its
+    start until every accelerometer topic has both: one subscriber is not enough."""
+    sim = ros.add(SimNode(context=ros.context, parameter_overrides=[
+        Parameter("time_mode", value="sim"), Parameter("wait_for_subscribers", value=True),
+        Parameter("subscribers_per_topic", value=2)]))
+    topics, qos = ("accel/front", "accel/rear"), qos_profile_sensor_data  # the sim's best effort
+    for topic in topics:
+        ros.probe.create_subscription(Imu, topic, lambda _: None, qos)
+    assert ros.spin_until(lambda: all(p.get_subscription_count() == 1 for p in sim._pub), 10.0)
+    ros.spin_until(lambda: sim.published > 0, 1.0)
+    assert sim.published == 0
+    got: list = []
+    ros.probe.create_subscription(Imu, topics[0], got.append, qos)
+    ros.spin_until(lambda: sim.published > 0, 1.0)
+    assert sim.published == 0  # the rear has one subscriber still
+    ros.probe.create_subscription(Imu, topics[1], lambda _: None, qos)
+    assert ros.spin_until(lambda: got, 10.0)
 
 
 def test_console_scripts_across_processes():

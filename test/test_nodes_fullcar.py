@@ -202,7 +202,8 @@ def test_signals_stop_the_full_car_nodes_cleanly_with_a_valid_bag(tmp_path):
                                 "window_s:=20.0", "speed_topic:=sim/speed", "pipeline.refine:=none",
                                 "qos_depth:=10000"),
         "sim_node": start("sim_node", f"vehicle_file:={FULL_FILE}", "time_mode:=sim", "real_time_factor:=5.0",
-                          "wait_for_subscribers:=true", "road.amplitudes:=gaussian"),
+                          "wait_for_subscribers:=true", "subscribers_per_topic:=2",
+                          "road.amplitudes:=gaussian"),
     }
     got: list = []
     try:
@@ -223,8 +224,8 @@ def test_signals_stop_the_full_car_nodes_cleanly_with_a_valid_bag(tmp_path):
         assert "Traceback" not in out + err, name
     counts = check_bag(tmp_path / "bag")
     assert counts.get("/inertia", 0) >= 1, counts
-    # The sim waits for one subscriber per topic (the estimator's): the recorder, which learns
-    # the topics from the estimator, may join seconds later. From then on nothing is lost.
+    # The sim waits for two subscribers per topic (the estimator's, the recorder's; as the
+    # launch file's record:=true does); from the recorder's first sample on nothing is lost.
     stamps: dict[str, list[int]] = {f"/accel/{c}": [] for c in CORNERS}
     with AnyReader([tmp_path / "bag"]) as reader:
         for conn, t, _ in reader.messages([c for c in reader.connections if c.topic in stamps]):
