@@ -23,7 +23,7 @@ from collections.abc import Callable
 import numpy as np
 from scipy import sparse
 
-from rozyn_estimator.method.likelihood.grid import lagrange_weights, map_bins
+from rozyn_estimator.method.likelihood.grid import lagrange_matrix, map_bins
 
 ALIAS_STEP = 4  # the aliases' nodes: every 4th of the band's (0.2 Hz on the default grid)
 Linear = Callable[[np.ndarray], np.ndarray]  # stacked (..., F, k, k) -> (..., nodes, k, k)
@@ -41,7 +41,7 @@ def evaluation_map(freq_hz: np.ndarray, m2_hz2: np.ndarray,
     n_nodes = max(8, math.ceil(span / grid_hz - 1e-9) + 1) if grid_hz > 0 else targets.size
     if grid_hz <= 0 or n_nodes >= 0.75 * targets.size:
         return targets, (averaging_matrix(freq_hz, m2_hz2) if smooth else None)
-    op = _lagrange_matrix((targets - targets[0]) / grid_hz, n_nodes)
+    op = lagrange_matrix((targets - targets[0]) / grid_hz, n_nodes)
     if smooth:
         op = sparse.csr_array(averaging_matrix(freq_hz, m2_hz2) @ op)
     return targets[0] + grid_hz * np.arange(n_nodes), op
@@ -61,18 +61,9 @@ def alias_map(nodes_hz: np.ndarray, step: int) -> tuple[np.ndarray, Linear | Non
     n_alias = max(8, math.ceil((n - 1) / step) + 1) if step > 1 else n
     if step <= 1 or n_alias >= n:
         return nodes_hz, None
-    op = _lagrange_matrix(np.arange(n) / step, n_alias)
+    op = lagrange_matrix(np.arange(n) / step, n_alias)
     spacing = (nodes_hz[-1] - nodes_hz[0]) / (n - 1)
     return nodes_hz[0] + step * spacing * np.arange(n_alias), lambda s: apply(op, s)
-
-
-def _lagrange_matrix(x: np.ndarray, n_nodes: int) -> sparse.csr_array:
-    """(x.size, n_nodes) the interpolation from equally spaced nodes to the positions ``x``
-    (in node spacings; :func:`~rozyn_estimator.method.likelihood.grid.lagrange_weights`)."""
-    first, weights = lagrange_weights(x, n_nodes)
-    cols = first[:, None] + np.arange(weights.shape[1])
-    rows = np.repeat(np.arange(x.size), weights.shape[1])
-    return sparse.csr_array((weights.ravel(), (rows, cols.ravel())), shape=(x.size, n_nodes))
 
 
 def extended(freq_hz: np.ndarray) -> np.ndarray:

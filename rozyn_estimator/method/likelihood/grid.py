@@ -170,11 +170,16 @@ def _reduction(n_bins: int, kernel: tuple[float, ...], step: int) -> Reduction:
 def interpolation(n_ext: int, step: int) -> sparse.csr_array:
     """The sparse map from the evaluation grid's nodes (every ``step``-th of ``n_ext`` bins)
     to every bin of the extended grid, by the Lagrange polynomials alone (no smoothing)."""
-    n_nodes = node_count(n_ext, step)
-    first, weights = _lagrange(n_ext, step, n_nodes)
+    return lagrange_matrix(np.arange(n_ext) / step, node_count(n_ext, step))
+
+
+def lagrange_matrix(x: np.ndarray, n_nodes: int) -> sparse.csr_array:
+    """(x.size, n_nodes) the interpolation from equally spaced nodes to the positions ``x``
+    (in node spacings; :func:`lagrange_weights`) as a sparse matrix."""
+    first, weights = lagrange_weights(x, n_nodes)
     cols = first[:, None] + np.arange(weights.shape[1])
     return sparse.csr_array((weights.ravel(), cols.ravel(), np.arange(0, weights.size + 1, weights.shape[1])),
-                            shape=(n_ext, n_nodes))
+                            shape=(x.size, n_nodes))
 
 
 def _lagrange(n_fine: int, step: int, n_nodes: int, points: int = 8) -> tuple[np.ndarray, np.ndarray]:
