@@ -266,7 +266,11 @@ def test_bench_trials_per_second_of_the_refined_method_runs_the_same_mix(monkeyp
     chunks.clear()
     rate = study.bench_trials_per_second(method="likelihood")
     assert rate > 0 and len(rozyn) == 1 + 24  # the warm-up, then one trial per road and duration
-    assert [(c.cell, c.seeds) for c in chunks] == [(c.cell, c.seeds) for c in rozyn]
+    # the refined method as its study runs it: one nested drive per road, the same times
+    assert len(chunks) == 1 + 2 and [c.cell.road for c in chunks[1:]] == ["iso", "laplace"]
+    assert {c.durations_s for c in chunks} == {tuple(float(d) for d in range(10, 121, 10))}
+    assert sorted((c.cell.road, c.cell.duration_s) for c in rozyn[1:]) == \
+        sorted((c.cell.road, d) for c in chunks[1:] for d in c.durations_s)
     assert {(c.spec.method, c.spec.pipeline_config().refine) for c in chunks} == {("likelihood",) * 2}
     assert {(c.spec.method, c.spec.pipeline_config().refine) for c in rozyn} == {("rozyn", "none")}
 

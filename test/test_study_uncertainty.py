@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import json
 import shutil
 
 import numpy as np
@@ -16,6 +17,7 @@ import pytest
 
 from rozyn_estimator.method import METHODS, PARAM_NAMES
 from rozyn_estimator.tools.cli import main
+from rozyn_estimator.tools.drives import run_drive
 from rozyn_estimator.tools.study import (
     Cell,
     CellSummary,
@@ -53,9 +55,11 @@ def refined(tmp_path_factory):
 def test_each_row_carries_the_published_and_the_statistical_std(refined):
     records = _records(refined / "results.csv")
     assert tuple(records[0]) == COLUMNS and len(records) == 8
+    assert SETTINGS.nested  # a refined method's study: one drive per trial, estimated after 20 and 40 s
+    spec = SETTINGS.trial_spec(SETTINGS.drive_cell("iso", 100.0))
     for record in records[::3]:  # a few trials, repeated here
-        cell = Cell("iso", 100.0, float(record["duration_s"]))
-        est = run_trial(SETTINGS.trial_spec(cell), int(record["seed"])).estimate
+        drive = run_drive(spec, int(record["seed"]), SETTINGS.durations_s)
+        est = drive[SETTINGS.durations_s.index(float(record["duration_s"]))].estimate
         assert record["stage"] == est.stage == "likelihood" and est.budget is not None
         for i, name in enumerate(PARAM_NAMES):
             assert float(record[f"{name}_std"]) == np.sqrt(est.covariance[i, i])
@@ -64,6 +68,17 @@ def test_each_row_carries_the_published_and_the_statistical_std(refined):
     rows = read_results(refined / "results.csv")
     assert rows[0].std == tuple(float(records[0][f"{n}_std"]) for n in PARAM_NAMES)
     assert rows[0].std_statistical == tuple(float(records[0][f"{n}_std_statistical"]) for n in PARAM_NAMES)
+
+
+def test_rozyn_trial_durations_s_repeats_a_row_of_the_refined_study(refined, capsys):
+    row = _records(refined / "results.csv")[-1]
+    capsys.readouterr()
+    assert main(["trial", "--seed", row["seed"], "--speed-kmh", "100", "--durations-s", "20,40",
+                 "--method", "likelihood", "--json", "--jobs", "1"]) == 0
+    trial = [json.loads(line) for line in capsys.readouterr().out.splitlines()][-1]
+    assert trial["duration_s"] == float(row["duration_s"]) == 40.0
+    for name in PARAM_NAMES:
+        assert trial[name] == float(row[name]), name
 
 
 def test_the_study_runs_the_refined_method_as_shipped():

@@ -8,11 +8,13 @@ and the readable report (:func:`format_trials`); the trials themselves are
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from collections.abc import Sequence
 
 from rozyn_estimator.method import METHODS
+from rozyn_estimator.tools.drives import run_any_drive
 from rozyn_estimator.tools.options import (
     add_departure_options,
     add_run_options,
@@ -26,6 +28,7 @@ from rozyn_estimator.tools.trial import (
     VEHICLE_ERRORS,
     TrialResult,
     TrialSpec,
+    parallel_map,
     parse_seeds,
     run_trials,
     summarise,
@@ -55,6 +58,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_vehicle_option(p)
     add_departure_options(p)
     add_vehicle_error_options(p)
+    p.add_argument("--durations-s", metavar="GRID",
+                   help="a nested drive instead of --duration-s: one drive as long as the longest of these "
+                        "measurement times (START:STOP:STEP and/or a comma list), estimated after each, "
+                        "each update warm-started from the last; with a nested study's seed and times it "
+                        "repeats that study's drive")
     seeds = p.add_mutually_exclusive_group()
     seeds.add_argument("--seed", type=int, default=1, help="one seed (default: 1)")
     seeds.add_argument("--seeds", metavar="SPEC", help="seeds: 1-100, or 1,5,9-12")
@@ -77,6 +85,8 @@ def trial_spec(args: argparse.Namespace) -> TrialSpec:
 
 def run(args: argparse.Namespace) -> int:
     """``rozyn trial``."""
+    if args.durations_s is not None:
+        return run_drives(args)
     if args.model == "full":
         from rozyn_estimator.tools import trial_full
 
@@ -91,6 +101,37 @@ def run(args: argparse.Namespace) -> int:
             print(json.dumps(result.to_dict()), flush=True)
     if not args.json:
         print(format_trials(spec, results))
+    return 0
+
+
+def run_drives(args: argparse.Namespace) -> int:
+    """``rozyn trial --durations-s``: nested drives (:mod:`rozyn_estimator.tools.drives`), a
+    report (or JSON lines, with ``duration_s``) per measurement time."""
+    from rozyn_estimator.tools import trial_full
+    from rozyn_estimator.tools.study.settings import parse_grid
+
+    durations = parse_grid(args.durations_s, "durations-s")
+    if args.model == "full":
+        args.method = args.method or "likelihood"
+    spec: TrialSpec | trial_full.FullTrialSpec = trial_full.spec_from_args(args) if args.model == "full" \
+        else trial_spec(args)
+    seeds = parse_seeds(args.seeds if args.seeds is not None else str(args.seed))
+    warm = getattr(spec.pipeline_config(), "refine", "none") != "none"  # Rozyn's pipeline keeps no state
+    drives = list(parallel_map(run_any_drive, [(spec, s, durations) for s in seeds], jobs=args.jobs,
+                               progress=not args.quiet and sys.stderr.isatty(), unit="drive"))
+    for j, duration in enumerate(durations):
+        results = [drive[j] for drive in drives]
+        if not args.json:
+            print(f"nested drive: after {duration:g} s of {durations[-1]:g} s"
+                  + (", warm-started from the last update" if j and warm else ""))
+        if args.json:
+            for result in results:
+                print(json.dumps({"duration_s": duration, **result.to_dict()}), flush=True)
+        elif isinstance(spec, TrialSpec):
+            print(format_trials(spec.replace(duration_s=duration), results) + "\n")
+        else:
+            sim = dataclasses.replace(spec.sim, duration_s=duration)
+            print(trial_full.format_full_trials(dataclasses.replace(spec, sim=sim), results) + "\n")
     return 0
 
 

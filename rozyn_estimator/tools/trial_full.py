@@ -50,6 +50,10 @@ class FullTrialSpec:
         assert isinstance(v, FullVehicle)
         return v
 
+    def pipeline_config(self) -> PipelineConfig:
+        """The estimator's settings: ``pipeline``, else the method's."""
+        return self.pipeline or METHODS[self.method]
+
     @property
     def truth(self) -> np.ndarray:
         v = self.vehicle
@@ -109,7 +113,7 @@ def simulate_full(spec: FullTrialSpec, seed: int) -> tuple[np.ndarray, np.ndarra
 def run_full_trial(spec: FullTrialSpec, seed: int) -> FullTrialResult:
     """Simulate one seeded full-car run and estimate."""
     accel, speed, channels, sim_ms = simulate_full(spec, seed)
-    cfg = spec.pipeline or METHODS[spec.method]
+    cfg = spec.pipeline_config()
     est = estimate_full(accel, spec.sim.rate_hz, spec.vehicle, cfg, speed, sensors=channels)
     return FullTrialResult(seed, est, spec.truth, sim_ms)
 

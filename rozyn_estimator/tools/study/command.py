@@ -2,7 +2,9 @@
 
 Every (road, speed, measurement time, trial) of a grid is one seeded trial
 (:func:`rozyn_estimator.tools.trial.run_trial`; with ``--model full`` the 7-DOF full car's,
-:func:`rozyn_estimator.tools.trial_full.run_full_trial`, five parameters). Trials run in
+:func:`rozyn_estimator.tools.trial_full.run_full_trial`, five parameters), or with nested
+drives (a refined method's default) every (road, speed, trial) one seeded drive, estimated
+after each measurement time (:mod:`rozyn_estimator.tools.drives`). Trials run in
 chunks on local processes or on a Dask distributed cluster (``--scheduler``); the parent
 process appends each finished chunk to ``results.csv``, so an interrupted study resumes
 where it stopped. Each trial's seed is a function of the study's seed base, the cell and
@@ -46,6 +48,7 @@ from rozyn_estimator.tools.study.models import FULL, MODELS
 from rozyn_estimator.tools.study.outputs import write_outputs, write_tables
 from rozyn_estimator.tools.study.results import TrialRow, read_results
 from rozyn_estimator.tools.study.settings import (
+    DRIVES,
     FIGURES,
     MANIFEST,
     RESULTS,
@@ -113,6 +116,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                          help="a built-in vehicle: table5-1 (the default) or second (heavier, longer; the "
                               "full car's: an SUV with its CoG 3 cm left of the centreline)")
     grid.add_argument("--seed-base", type=int, metavar="N", help="changes every road seed (default: 0)")
+    grid.add_argument("--drives", choices=DRIVES,
+                      help="nested: one drive per road, speed and trial, estimated after each measurement "
+                           "time, each update warm-started from the last (as the node updates its growing "
+                           "window); independent: a drive per cell and trial (the thesis' design) (default: "
+                           "nested for a refined method, else independent)")
 
     run = p.add_argument_group("running")
     run.add_argument("--out", required=True, type=Path, metavar="DIR", help="output directory")
@@ -137,7 +145,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 _GRID_ARGS = ("roads", "speeds_kmh", "durations_s", "trials", "amplitudes", "road_class", "laplace_nu",
-              "rate_hz", "noise_std_mps2", "noise_fraction", "method", "seed_base")
+              "rate_hz", "noise_std_mps2", "noise_fraction", "method", "seed_base", "drives")
 _SETTING_ARGS = ("model", *_GRID_ARGS, "vehicle", "vehicle_preset")
 
 

@@ -27,6 +27,7 @@ from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig
 
 STUDY_ROADS = ("iso", "laplace")
+DRIVES = ("independent", "nested")
 THESIS_CELL = (100.0, 100.0)  # km/h, s: the condition of the thesis' Figs 5-3 to 5-10
 
 # The files of a study directory.
@@ -82,12 +83,18 @@ class StudySettings:
                                   low=0.0)
     method: str = param("", "estimation method; empty: the model's default_method()", choices=tuple(METHODS))
     seed_base: int = param(0, "changes every road seed", low=0)
+    drives: str = param("", "independent: a drive per cell and trial (the thesis' design); nested: one drive "
+                        "per road, speed and trial, estimated after each measurement time of it, each update "
+                        "warm-started from the last (tools/drives.py); empty: nested for a refined method, "
+                        "else independent", choices=("", *DRIVES))
     vehicle: Vehicle = param(description="the half car", default_factory=Vehicle)
     full_vehicle: FullVehicle = param(description="the full car (model full)", default_factory=FullVehicle)
 
     def __post_init__(self) -> None:
         if not self.method and self.model in MODELS:  # an unknown model is refused by check()
             object.__setattr__(self, "method", default_method(self.model))
+        if not self.drives and self.method in METHODS:
+            object.__setattr__(self, "drives", "nested" if self.refined else "independent")
         check(self, (
             ("method", lambda s: s.method in s.car.methods,
              f"the full car has {', '.join(MODELS['full'].methods)}"),
@@ -126,6 +133,20 @@ class StudySettings:
         return self.car.reference(self.studied_vehicle)
 
     @property
+    def refined(self) -> bool:
+        """The method refines Rozyn's estimate (its updates can start from the previous one's)."""
+        return getattr(self.pipeline_config(), "refine", "none") != "none"
+
+    @property
+    def nested(self) -> bool:
+        """One drive per road, speed and trial, estimated after each measurement time."""
+        return self.drives == "nested"
+
+    def drive_cell(self, road: str, speed_kmh: float) -> Cell:
+        """The cell of a nested drive: the road and speed at the longest measurement time."""
+        return Cell(road, speed_kmh, max(self.durations_s))
+
+    @property
     def n_trials(self) -> int:
         return len(self.roads) * len(self.speeds_kmh) * len(self.durations_s) * self.trials
 
@@ -157,15 +178,21 @@ class StudySettings:
         )
 
     def seed(self, cell: Cell, trial: int) -> int:
-        """The road seed of a trial: a function of the seed base, the cell and the trial only.
+        """The road seed of a trial: a function of the seed base, the cell and the trial only
+        (nested drives: of the road, the speed and the trial; every measurement time of a
+        drive has its seed).
 
         Adding cells to a grid, or running it on more workers, leaves every other trial
-        as it was; ``rozyn trial --seed SEED`` with the cell's options repeats a trial.
+        as it was; ``rozyn trial --seed SEED`` with the cell's options repeats a trial (a nested
+        drive's: with ``--durations-s`` the grid's times).
         """
-        key = [
-            self.seed_base, zlib.crc32(cell.road.encode()), round(cell.speed_kmh * 1000),
-            round(cell.duration_s * 1000), trial,
-        ]
+        if self.nested:
+            key = [self.seed_base, zlib.crc32(cell.road.encode()), round(cell.speed_kmh * 1000), trial]
+        else:
+            key = [
+                self.seed_base, zlib.crc32(cell.road.encode()), round(cell.speed_kmh * 1000),
+                round(cell.duration_s * 1000), trial,
+            ]
         return int(np.random.SeedSequence(key).generate_state(1, dtype=np.uint32)[0] >> 1)
 
     def to_dict(self) -> dict[str, Any]:
@@ -191,6 +218,7 @@ class StudySettings:
                 values["vehicle"] = vehicle_from_mapping(values.get("vehicle", {}), source=MANIFEST)
             for name in ("roads", "speeds_kmh", "durations_s"):
                 values[name] = tuple(values[name])
+            values.setdefault("drives", "independent")  # a manifest from before nested drives
             return cls(**values)
         except (KeyError, TypeError) as exc:
             raise ConfigError(f"{MANIFEST}: not a study manifest this version can read ({exc})") from None

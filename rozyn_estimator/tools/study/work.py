@@ -2,10 +2,12 @@
 
 Every (road, speed, measurement time, trial) is one seeded trial
 (:func:`rozyn_estimator.tools.trial.run_trial`; the full car's:
-:func:`rozyn_estimator.tools.trial_full.run_full_trial`). :func:`run_study` runs the missing ones in
-chunks (:class:`Chunk`) and appends each finished chunk to ``results.csv``. Each trial's
-seed depends on the settings, the cell and the trial number only, and each trial runs on
-one BLAS thread: the results are bit-identical whatever the number of workers.
+:func:`rozyn_estimator.tools.trial_full.run_full_trial`), or, with nested drives, every (road,
+speed, trial) one seeded drive estimated after each measurement time
+(:mod:`rozyn_estimator.tools.drives`). :func:`run_study` runs the missing ones in chunks
+(:class:`Chunk`) and appends each finished chunk to ``results.csv``. Each trial's seed
+depends on the settings, the cell and the trial number only, and each trial runs on one
+BLAS thread: the results are bit-identical whatever the number of workers.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.tools.drives import run_any_drive
 from rozyn_estimator.tools.study.directory import load_manifest, new_manifest, write_manifest
 from rozyn_estimator.tools.study.results import ResultsWriter, TrialRow, sort_rows, write_results
 from rozyn_estimator.tools.study.settings import MANIFEST, RESULTS, Cell, StudySettings
@@ -34,12 +37,19 @@ DEFAULT_CHUNK_TRIALS = 25
 
 @dataclass(frozen=True)
 class Chunk:
-    """Trials of one cell, run as one task (amortises process and scheduler overhead)."""
+    """Trials of one cell, run as one task (amortises process and scheduler overhead); nested
+    drives: of one road and speed, ``cell`` at the longest of ``durations_s``."""
 
     spec: TrialSpec | FullTrialSpec
     cell: Cell
     trials: tuple[int, ...]
     seeds: tuple[int, ...]
+    durations_s: tuple[float, ...] = ()  # nested drives: the measurement times of each; () independent
+
+    @property
+    def n_rows(self) -> int:
+        """The results.csv rows it gives."""
+        return len(self.trials) * max(1, len(self.durations_s))
 
 
 @functools.cache
@@ -51,27 +61,46 @@ def one_blas_thread() -> None:
 def run_chunk(chunk: Chunk) -> list[TrialRow]:
     """Run a chunk's trials (in a worker process, a Dask worker or here)."""
     one_blas_thread()
-    return [_run_one(chunk, trial, seed) for trial, seed in zip(chunk.trials, chunk.seeds, strict=True)]
+    run = _run_drive if chunk.durations_s else _run_one
+    pairs = zip(chunk.trials, chunk.seeds, strict=True)
+    return [row for trial, seed in pairs for row in run(chunk, trial, seed)]
 
 
-def _run_one(chunk: Chunk, trial: int, seed: int) -> TrialRow:
+def _run_one(chunk: Chunk, trial: int, seed: int) -> list[TrialRow]:
     """One trial; an exception becomes an ``error`` row so one bad road cannot stop a study."""
     try:
         spec = chunk.spec
         result = run_full_trial(spec, seed) if isinstance(spec, FullTrialSpec) else run_trial(spec, seed)
-        return TrialRow.from_result(chunk.cell, trial, result)
+        return [TrialRow.from_result(chunk.cell, trial, result)]
     except Exception as exc:
-        return TrialRow(chunk.cell, trial, seed, "error", None, None, f"{type(exc).__name__}: {exc}", "")
+        return [_error_row(chunk.cell, trial, seed, exc)]
+
+
+def _run_drive(chunk: Chunk, trial: int, seed: int) -> list[TrialRow]:
+    """One nested drive: a row per measurement time (all ``error`` rows if it raises)."""
+    cells = [Cell(chunk.cell.road, chunk.cell.speed_kmh, d) for d in sorted(chunk.durations_s)]
+    try:
+        results = run_any_drive((chunk.spec, seed, chunk.durations_s))
+        return [TrialRow.from_result(cell, trial, r) for cell, r in zip(cells, results, strict=True)]
+    except Exception as exc:
+        return [_error_row(cell, trial, seed, exc) for cell in cells]
+
+
+def _error_row(cell: Cell, trial: int, seed: int, exc: Exception) -> TrialRow:
+    return TrialRow(cell, trial, seed, "error", None, None, f"{type(exc).__name__}: {exc}", "")
 
 
 def plan_chunks(
     settings: StudySettings, done: set[tuple[str, float, float, int]], chunk_trials: int
 ) -> list[Chunk]:
-    """The missing trials, in chunks of one cell, longest measurement time first.
+    """The missing trials, in chunks of one cell, longest measurement time first (nested
+    drives: the drives with a missing measurement time, in chunks of one road and speed).
 
     Longest first keeps the end of a parallel run short (the last tasks are the cheap
     ones); the order does not affect any result.
     """
+    if settings.nested:
+        return _drive_chunks(settings, done, chunk_trials)
     chunks = []
     for cell in settings.cells():
         todo = [t for t in range(settings.trials)
@@ -83,6 +112,25 @@ def plan_chunks(
             trials = tuple(todo[i : i + chunk_trials])
             chunks.append(Chunk(spec, cell, trials, tuple(settings.seed(cell, t) for t in trials)))
     chunks.sort(key=lambda c: -c.cell.duration_s)
+    return chunks
+
+
+def _drive_chunks(
+    settings: StudySettings, done: set[tuple[str, float, float, int]], chunk_trials: int
+) -> list[Chunk]:
+    """The nested drives with a measurement time missing from ``done`` (rerun whole: each
+    time's estimate starts from the one before; run_study keeps the missing rows)."""
+    chunks = []
+    for road in settings.roads:
+        for speed in settings.speeds_kmh:
+            cell = settings.drive_cell(road, speed)
+            todo = [t for t in range(settings.trials)
+                    if any((road, speed, d, t) not in done for d in settings.durations_s)]
+            spec = settings.trial_spec(cell)
+            for i in range(0, len(todo), chunk_trials):
+                trials = tuple(todo[i: i + chunk_trials])
+                chunks.append(Chunk(spec, cell, trials, tuple(settings.seed(cell, t) for t in trials),
+                                    settings.durations_s))
     return chunks
 
 
@@ -189,8 +237,9 @@ def run_study(
             client.close()
     manifest = _manifest_with_run(out_dir, settings, options)
     rows = list(done)
-    chunks = plan_chunks(settings, {r.key for r in rows}, options.chunk_trials)
-    todo = sum(len(c.trials) for c in chunks)
+    done_keys = {r.key for r in rows}
+    chunks = plan_chunks(settings, done_keys, options.chunk_trials)
+    todo = sum(c.n_rows for c in chunks)
     writer = ResultsWriter(out_dir / RESULTS, model=settings.car)
     bar = _progress(settings.n_trials, len(rows), options.progress)
     started = time.perf_counter()
@@ -198,6 +247,7 @@ def run_study(
     try:
         source = dask_results(chunks, client) if client else local_results(chunks, options.jobs)
         for chunk_rows in source:
+            chunk_rows = [r for r in chunk_rows if r.key not in done_keys]  # a resumed drive's done times
             writer.write(chunk_rows)
             rows.extend(chunk_rows)
             bar.update(len(chunk_rows))
@@ -254,8 +304,9 @@ def bench_trials_per_second(repeats: int = 1, method: str = "", amplitudes: str 
 
     One trial per (road, duration) at 60 km/h, durations 10 to 120 s: the mix of a full
     study, with ``method`` (default: the study's, Rozyn's pipeline; ``likelihood``: the
-    refined estimator), on roads of ``amplitudes`` with relative sensor noise
-    ``noise_fraction``. Multiply by the cores for a study's rate.
+    refined estimator, as its study runs it: one nested drive per road), on roads of
+    ``amplitudes`` with relative sensor noise ``noise_fraction``. Multiply by the cores for
+    a study's rate.
     """
     settings = StudySettings(speeds_kmh=(60.0,), trials=1, method=method, amplitudes=amplitudes,
                              noise_fraction=noise_fraction)
@@ -265,4 +316,4 @@ def bench_trials_per_second(repeats: int = 1, method: str = "", amplitudes: str 
     for _ in range(repeats):
         for chunk in chunks:
             run_chunk(chunk)
-    return repeats * len(chunks) / (time.perf_counter() - started)
+    return repeats * sum(c.n_rows for c in chunks) / (time.perf_counter() - started)
