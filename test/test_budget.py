@@ -118,6 +118,25 @@ def test_asymmetric_dampers_fail_the_model_fit_check(clean):
     assert not fit.ok and fit.p_value < 1e-4 and "nonlinear suspension" in fit.verdict
 
 
+def test_a_model_fit_check_on_a_singular_spectrum_is_not_computable_not_fits(clean, monkeypatch):
+    from rozyn_estimator.method.likelihood import fitcheck
+
+    real = fitcheck.cholesky2
+
+    def singular_at_one_bin(S):
+        l11, l21, l22 = real(S)
+        l22 = l22.copy()
+        l22[3] = 0.0  # S singular there (a channel fitted as noise-free)
+        return l11, l21, l22
+
+    monkeypatch.setattr(fitcheck, "cholesky2", singular_at_one_bin)
+    fit = refine(clean, 100.0, EXACT, START, SPEED).model_fit
+    assert fit is not None and not fit.ok and fit.verdict == fitcheck.NOT_COMPUTABLE
+    record = fit.to_dict()
+    assert record["statistic"] is None and record["p"] is None
+    json.dumps(record, allow_nan=False)  # valid JSON
+
+
 def test_budget_groups_and_text():
     b = Budget(np.diag([1.0, 4.0, 1e-6]), {"tyre_stiffness_front_npm": np.array([3.0, 0.0, 0.0]),
                                            "tyre_stiffness_rear_npm": np.array([4.0, 0.0, 0.0]),

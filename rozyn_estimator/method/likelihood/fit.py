@@ -233,8 +233,9 @@ def _refine(
         notes.append(f"likelihood fit: not converged in {cfg.max_iter} iterations")
     try:
         _check_noise(theta, objective, cfg)
-        found = uncertainty(objective, model, theta, vehicle, cfg, y,
-                            warm.sensitivities if isinstance(warm, Refinement) else None)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # not finite: _check refuses it
+            found = uncertainty(objective, model, theta, vehicle, cfg, y,
+                                warm.sensitivities if isinstance(warm, Refinement) else None)
         if not found.converged:
             notes.append(f"likelihood calibration: not converged in {cfg.max_iter} iterations")
         _check(found.params, found.covariance, L)

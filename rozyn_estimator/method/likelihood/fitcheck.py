@@ -44,6 +44,8 @@ N_BANDS = 8
 ALPHA = 1e-3  # a p-value below this: the model does not fit (a WARN)
 Z_DEPARTURE = 4.0  # a calibrated sensor value this many posterior std from nominal: a WARN
 FITS = "fits"
+NOT_COMPUTABLE = ("the model-fit check cannot be computed: the fitted spectral matrix is singular at some "
+                  "frequencies (a channel fitted as noise-free)")
 
 
 @dataclass(frozen=True)
@@ -61,7 +63,10 @@ class ModelFit:
         return self.verdict == FITS
 
     def to_dict(self) -> dict[str, object]:
-        return {"statistic": self.statistic, "dof": self.dof, "p": self.p_value,
+        def number(x: float) -> float | None:  # JSON has no NaN (a check that cannot be computed)
+            return x if math.isfinite(x) else None
+
+        return {"statistic": number(self.statistic), "dof": self.dof, "p": number(self.p_value),
                 "worst_band_hz": list(self.worst_band_hz), "verdict": self.verdict}
 
 
@@ -74,10 +79,14 @@ def model_fit(objective: WhittleObjective, theta: np.ndarray, n_free: int,
     S, _ = objective.model.spectrum(theta, derivatives=False)  # the full model, also for an auto fit
     d = spectra.dft / math.sqrt(spectra.n_samples * spectra.fs_hz)
     # w = L⁻¹ d with S = L Lᴴ (Cholesky, written out for 2x2: numpy's loops per matrix)
-    l11, l21, l22 = cholesky2(S)
-    w1 = d[:, 0] / l11
-    w = np.column_stack([w1, (d[:, 1] - l21 * w1) / l22])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        l11, l21, l22 = cholesky2(S)
+        w1 = d[:, 0] / l11
+        w = np.column_stack([w1, (d[:, 1] - l21 * w1) / l22])
+    dof = max(1, 4 * N_BANDS - n_free)
     f = spectra.freq_hz
+    if not np.all(np.isfinite(w)):  # S singular somewhere: no whitening, no statistic (never "fits")
+        return ModelFit(math.nan, dof, math.nan, (float(f[0]), float(f[-1])), NOT_COMPUTABLE)
     edges = np.geomspace(f[0], f[-1] * (1 + 1e-9), N_BANDS + 1)
     kappa = _neighbour_correlation(spectra.window_dft)
     per_band, cross_share = [], []
@@ -90,7 +99,6 @@ def model_fit(objective: WhittleObjective, theta: np.ndarray, n_free: int,
         per_band.append(2.0 * n / kappa * full)
         cross_share.append(1.0 - auto / full if full > 0 else 0.0)
     statistic = float(np.sum(per_band))
-    dof = max(1, 4 * N_BANDS - n_free)
     p = float(stats.chi2.sf(statistic, dof))
     worst = int(np.argmax(per_band))
     band = (float(edges[worst]), float(min(edges[worst + 1], f[-1])))
