@@ -9,7 +9,8 @@ The studies (``out/`` is git-ignored), both on Gaussian roads with 10 % sensor n
 
 - ``out/study-likelihood``: the shipped estimator (Rozyn's pipeline, then the likelihood
   refinement with its uncertainty budget), the full thesis grid, 100 roads per cell;
-- ``out/study-rozyn-noise``: Rozyn's pipeline alone on the same roads (same seeds);
+- ``out/study-rozyn-noise``: Rozyn's pipeline alone on the same roads (same seeds: nested drives
+  as the refined study's);
 - ``out/study-likelihood-exact``: the shipped estimator for a vehicle known exactly
   (``scripts/vehicle_exact.yaml``: every tolerance zero), at 30, 60 and 100 km/h.
 
@@ -39,7 +40,7 @@ from rozyn_estimator.tools.study.precision import shortest_drive_markdown, short
 GRID = ["--amplitudes", "gaussian", "--noise-fraction", "0.1"]
 STUDIES = {
     "likelihood": ["--method", "likelihood", *GRID],
-    "rozyn-noise": ["--method", "rozyn", *GRID],
+    "rozyn-noise": ["--method", "rozyn", "--drives", "nested", *GRID],
     # the vehicle known exactly (no tolerances): three speeds
     "likelihood-exact": ["--method", "likelihood", *GRID, "--speeds-kmh", "30,60,100",
                          "--vehicle", str(ROOT / "scripts" / "vehicle_exact.yaml")],
@@ -139,7 +140,12 @@ def section(refined: Run, rozyn: Run, exact: Run) -> str:
         f"{len(s.durations_s)} measurement times ({s.durations_s[0]:g}–{s.durations_s[-1]:g} s) × "
         f"{s.trials} roads, ISO 8608 class {s.road_class} with Gaussian amplitudes (the Laplace road "
         f"ν = {s.laplace_nu:g} over it), white sensor noise of {s.noise_fraction:.0%} of each "
-        f"channel's rms, the Table 5-1 vehicle. Regenerate with `scripts/refined_report.py --run`.",
+        f"channel's rms, the Table 5-1 vehicle. "
+        + ("Each road is one drive as long as the longest time, estimated after each measurement time "
+           "of it, every update warm-started from the one before, as the node updates (nested drives, "
+           "the refined study's default; Rozyn's pipeline below ran on the same drives). "
+           if s.nested else "")
+        + "Regenerate with `scripts/refined_report.py --run`.",
         "",
         f"- Timing: {timing_line(refined)}.",
         f"- {failures(refined)}.",
