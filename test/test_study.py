@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from dask_helpers import BIN, DaskProcesses
+from study_helpers import ctrl_c_at_chunk
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PARAM_NAMES
@@ -83,20 +84,10 @@ def test_outputs_exist_and_summary_matches_trials(reference):
     assert manifest["runs"][-1]["status"] == "complete" and manifest["runs"][-1]["trials_run"] == N_TRIALS
 
 
-def test_interrupted_study_resumes_to_identical_results(reference, tmp_path, monkeypatch):
+def test_interrupted_study_resumes_to_identical_results(reference, tmp_path):
     out = tmp_path / "resumed"
-    real_run_chunk = work.run_chunk
-    calls = []
-
-    def interrupted(chunk):
-        calls.append(chunk)
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        return real_run_chunk(chunk)
-
-    monkeypatch.setattr(work, "run_chunk", interrupted)  # looked up there by local_results
-    assert _study(out, "--jobs", "1", "--chunk-trials", "2", "--no-plots") == 130
-    monkeypatch.setattr(work, "run_chunk", real_run_chunk)
+    with ctrl_c_at_chunk(3):
+        assert _study(out, "--jobs", "1", "--chunk-trials", "2", "--no-plots") == 130
     assert len(_rows(out / "results.csv")) == 4
     assert json.loads((out / "study.json").read_text())["runs"][-1]["status"] == "interrupted"
     with (out / "results.csv").open("a") as f:

@@ -17,11 +17,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from dask_helpers import BIN, DaskProcesses
+from study_helpers import ctrl_c_at_chunk
 
 from rozyn_estimator.method import PARAM_NAMES
 from rozyn_estimator.method.full import FULL_PARAM_NAMES
 from rozyn_estimator.tools.cli import main
-from rozyn_estimator.tools.study import Cell, StudySettings, summarise_cells, work
+from rozyn_estimator.tools.study import Cell, StudySettings, summarise_cells
 from rozyn_estimator.tools.study.correlations import cell_correlations
 from rozyn_estimator.tools.study.models import FULL, HALF
 from rozyn_estimator.tools.study.plots import correlation_overlay, std_heatmaps
@@ -130,20 +131,10 @@ def test_the_figures_show_five_parameters_and_four_corners(refined):
         "iso: front right acceleration, 1 roads"
 
 
-def test_an_interrupted_full_study_resumes_to_the_same_results(fast, tmp_path, monkeypatch):
+def test_an_interrupted_full_study_resumes_to_the_same_results(fast, tmp_path):
     out = tmp_path / "resumed"
-    real_run_chunk = work.run_chunk
-    calls = []
-
-    def interrupted(chunk):
-        calls.append(chunk)
-        if len(calls) == 2:
-            raise KeyboardInterrupt
-        return real_run_chunk(chunk)
-
-    monkeypatch.setattr(work, "run_chunk", interrupted)
-    assert _study(out, *FAST, "--jobs", "1", "--chunk-trials", "1", "--no-plots") == 130
-    monkeypatch.setattr(work, "run_chunk", real_run_chunk)
+    with ctrl_c_at_chunk(2):
+        assert _study(out, *FAST, "--jobs", "1", "--chunk-trials", "1", "--no-plots") == 130
     assert len(_records(out / "results.csv")) == 1
     # The model comes from study.json: --resume needs no --model.
     assert _study(out, "--resume", "--jobs", "1", "--no-plots") == 0

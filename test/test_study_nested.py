@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from study_helpers import ctrl_c_at_chunk
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import estimate
@@ -93,20 +94,10 @@ def reference(tmp_path_factory) -> Path:
     return out
 
 
-def test_an_interrupted_nested_study_resumes_to_identical_results(reference, tmp_path, monkeypatch):
+def test_an_interrupted_nested_study_resumes_to_identical_results(reference, tmp_path):
     out = tmp_path / "resumed"
-    real_run_chunk = work.run_chunk
-    calls = []
-
-    def interrupted(chunk):
-        calls.append(chunk)
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        return real_run_chunk(chunk)
-
-    monkeypatch.setattr(work, "run_chunk", interrupted)
-    assert main(["study", *GRID, "--out", str(out), "--jobs", "1", "--chunk-trials", "1"]) == 130
-    monkeypatch.setattr(work, "run_chunk", real_run_chunk)
+    with ctrl_c_at_chunk(3):
+        assert main(["study", *GRID, "--out", str(out), "--jobs", "1", "--chunk-trials", "1"]) == 130
     lines = (out / "results.csv").read_text().splitlines(keepends=True)
     assert len(lines) == 1 + 2 * 2  # two drives of two times each
     # the last row (a drive's second time) cut short: that drive is run again, its first row kept
