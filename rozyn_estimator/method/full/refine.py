@@ -24,11 +24,13 @@ the best point of a coarse grid of heave, pitch and roll frequencies as well. Th
 wins (continued if it has not converged); a result that still explains a channel as
 mostly noise is refused.
 
-Covariance: the inverse Fisher information, mapped to the physical parameters, times the
-taper's variance factor ``mean(w⁴) / mean(w²)²`` (Dahlhaus 1988: a tapered periodogram's
-ordinates are fewer independent ones), the nuisances' uncertainty included (the inverse of
-the whole information), and raised where the road is not stationary (:mod:`.blocks`: half
-way to the score's time blocks' variance, or by the road's intermittency, the larger). What
+Covariance: the sandwich ``F⁻¹ Cov(∇ℓ) F⁻¹`` of the inverse Fisher information (the
+nuisances' uncertainty included) with the score's covariance under the model, which holds
+what the taper correlates (:mod:`.score`; a warm update keeps its ratio to the inverse
+Fisher information while the window's length stays and its body parameters move by less
+than 1 %), mapped to the physical parameters, and raised where the road is not stationary
+(:mod:`.blocks`: half way to the score's time blocks' variance, or by the road's
+intermittency, the larger). What
 the vehicle's tolerances add comes from :mod:`.refine_budget` (a warm update keeps the previous window's
 while its body parameters moved by less than 1 % (1 cm for the lateral CoG): the
 contributions are sensitivities of the model at θ).
@@ -44,10 +46,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import OptimizeResult, minimize
-from scipy.signal import windows
 
 from rozyn_estimator.method.full.blocks import variance_factors
 from rozyn_estimator.method.full.refine_budget import refinement_contributions
+from rozyn_estimator.method.full.score import sandwich_ratio
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum, expected_periodogram_m2
 from rozyn_estimator.method.full.whittle import FullWhittle, ridged
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
@@ -72,7 +74,7 @@ class FullRefinement:
     status: str  # "ok" | "failed"
     reason: str = ""
     params: np.ndarray | None = None  # (5,) in FULL_PARAM_NAMES order
-    covariance: np.ndarray | None = None  # (5, 5) the statistical part (inverse Fisher, taper factor)
+    covariance: np.ndarray | None = None  # (5, 5) the statistical part (the sandwich, the road's factors)
     theta: np.ndarray | None = None  # all fitted parameters (names in ``names``)
     names: tuple[str, ...] = ()
     neg_log_likelihood: float = math.nan  # ℓ at the optimum (constant terms dropped)
@@ -85,6 +87,8 @@ class FullRefinement:
     contributions: dict[str, np.ndarray] = field(default_factory=dict)  # assumed value -> (5,) per 1 u
     budget_theta: np.ndarray | None = None  # the body parameters θ[:5] the contributions were taken at
     variance_factors: tuple[float, ...] = ()  # the non-stationary road's factors on the model's variances
+    sandwich_ratio: np.ndarray | None = None  # (5, 5) the taper's sandwich over the model's std (.score)
+    sandwich_key: np.ndarray | None = None  # the window's length and θ[:5] it was computed at
     elapsed_ms: float = 0.0
     notes: tuple[str, ...] = ()
 
@@ -217,7 +221,10 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         raise _FitError("likelihood fit: singular information (a parameter the data do not "
                         "determine)") from exc
     jac = model.physical_jacobian(theta)
-    cov = _taper_factor(y.shape[0], cfg.taper) * jac @ theta_cov @ jac.T
+    model_cov = jac @ theta_cov @ jac.T
+    ratio, ratio_key = _sandwich(objective, theta, theta_cov, jac, spectra, warm)
+    scale = np.sqrt(np.abs(np.diag(model_cov)))
+    cov = ratio * np.outer(scale, scale)
     if not (np.all(np.isfinite(cov)) and np.all(np.diag(cov) > 0)):
         raise _FitError("likelihood fit: covariance not positive")
     factors = variance_factors(objective, theta, jac @ theta_cov, cov, spectra, y, share, cfg)
@@ -232,6 +239,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         noise_std_mps2=tuple(np.sqrt(np.exp(theta[model.noise_slice]) * fs).tolist()),
         waviness=float(theta[k["waviness"]]), coherence_scale=float(np.exp(theta[k["ln_coherence_scale"]])),
         contributions=contributions, budget_theta=budget_theta, variance_factors=tuple(factors.tolist()),
+        sandwich_ratio=ratio, sandwich_key=ratio_key,
         notes=notes)
 
 
@@ -355,12 +363,16 @@ def _grid_start(model: FullCarSpectrum, objective: FullWhittle, power: np.ndarra
     return finite[0][2]
 
 
-def _taper_factor(n: int, taper: float) -> float:
-    """mean(w⁴)/mean(w²)² of the cosine taper: the tapered Whittle estimate's variance factor."""
-    if taper <= 0:
-        return 1.0
-    w = windows.tukey(n, taper)
-    return float(np.mean(w**4) / np.mean(w**2) ** 2)
+def _sandwich(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndarray, jac: np.ndarray,
+              spectra: Spectra, warm: FullRefinement | None) -> tuple[np.ndarray, np.ndarray]:
+    """(the sandwich's ratio to the model's std, :func:`~.score.sandwich_ratio`; the key it was
+    computed at): the previous window's when it had as many samples and its body parameters
+    were within ``_BUDGET_MOVE`` of these (the ratio is the model's, not the data's)."""
+    key = np.r_[float(spectra.n_samples), theta[:5]]
+    if warm is not None and warm.sandwich_ratio is not None and warm.sandwich_key is not None and \
+            warm.sandwich_key[0] == key[0] and np.max(np.abs(key[1:] - warm.sandwich_key[1:])) < _BUDGET_MOVE:
+        return warm.sandwich_ratio, warm.sandwich_key
+    return sandwich_ratio(objective, theta, theta_cov, jac, spectra), key
 
 
 __all__ = ["FullRefinement", "refine_full", "ridged"]

@@ -14,10 +14,11 @@ import numpy as np
 SUM_STEP_HZ = 0.1
 
 
-def _lag_covariances(
+def lag_covariances(
     S_ext: np.ndarray, w_hat: np.ndarray, bins: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(lags δ, C_(k, k+δ) at the bins ``k`` of ``bins``): (n_δ,), (n_δ, len(bins), 2, 2).
+    """(lags δ, C_(k, k+δ) at the bins ``k`` of ``bins``): (n_δ,), (n_δ, len(bins), k, k)
+    (``S_ext``: (bins + 2J, k, k), the band's and J beyond each edge).
 
     ``C_(k, k+δ) = Σ_j ŵ_j ŵ*_(j+δ) S_ext(k - j + J)``: one matrix product of the window
     products with the shifted spectra, for every lag the window reaches (|δ| ≤ 2J: the
@@ -32,7 +33,7 @@ def _lag_covariances(
         products[row, j] = w_hat[j] * np.conj(w_hat[j + d])
     shifted = S_ext[(n - 1 - np.arange(n))[:, None] + bins[None, :]]  # [j + J, k] = S_ext[J - j + k]
     C = products @ shifted.reshape(n, -1)
-    return lags, C.reshape(lags.size, bins.size, 2, 2)
+    return lags, C.reshape(lags.size, bins.size, *S_ext.shape[1:])
 
 
 def _hermitian_numbers(A: np.ndarray) -> np.ndarray:
@@ -68,7 +69,7 @@ def covariance_sum(A: np.ndarray, S_ext: np.ndarray, w_hat: np.ndarray, step: in
     starts = np.arange(0, k, max(1, step))
     counts = np.diff(np.r_[starts, k])
     bins = starts + (counts - 1) // 2
-    lags, C = _lag_covariances(S_ext, w_hat, bins)
+    lags, C = lag_covariances(S_ext, w_hat, bins)
     h = _hermitian_numbers(A)  # (q, k, 4)
     g = np.matmul(_congruence(C), h[:, bins, :, None][:, None])[..., 0]  # (q, n_δ, kc, 4): each L h
     partner = bins[None, :] + lags[:, None]
