@@ -221,13 +221,16 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         raise _FitError("likelihood fit: singular information (a parameter the data do not "
                         "determine)") from exc
     jac = model.physical_jacobian(theta)
-    model_cov = jac @ theta_cov @ jac.T
-    ratio, ratio_key = _sandwich(objective, theta, theta_cov, jac, spectra, warm)
-    scale = np.sqrt(np.abs(np.diag(model_cov)))
+    combos = jac @ theta_cov  # each physical parameter's direction in θ
+    model_cov = combos @ jac.T
+    if not (np.all(np.isfinite(model_cov)) and np.all(np.diag(model_cov) > 0)):
+        raise _FitError("likelihood fit: covariance not positive")
+    ratio, ratio_key = _sandwich(objective, theta, combos, model_cov, spectra, warm)
+    scale = np.sqrt(np.diag(model_cov))
     cov = ratio * np.outer(scale, scale)
     if not (np.all(np.isfinite(cov)) and np.all(np.diag(cov) > 0)):
         raise _FitError("likelihood fit: covariance not positive")
-    factors = variance_factors(objective, theta, jac @ theta_cov, cov, spectra, y, share, cfg)
+    factors = variance_factors(objective, theta, combos, cov, spectra, y, share, cfg)
     cov = np.sqrt(factors)[:, None] * cov * np.sqrt(factors)[None, :]
     contributions, budget_theta = _contributions(objective, theta, theta_cov, vehicle, warm)
     converged = objective.decrement(theta) < cfg.tol
@@ -363,7 +366,7 @@ def _grid_start(model: FullCarSpectrum, objective: FullWhittle, power: np.ndarra
     return finite[0][2]
 
 
-def _sandwich(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndarray, jac: np.ndarray,
+def _sandwich(objective: FullWhittle, theta: np.ndarray, combos: np.ndarray, model_cov: np.ndarray,
               spectra: Spectra, warm: FullRefinement | None) -> tuple[np.ndarray, np.ndarray]:
     """(the sandwich's ratio to the model's std, :func:`~.score.sandwich_ratio`; the key it was
     computed at): the previous window's when it had as many samples and its body parameters
@@ -372,7 +375,7 @@ def _sandwich(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndarray, 
     if warm is not None and warm.sandwich_ratio is not None and warm.sandwich_key is not None and \
             warm.sandwich_key[0] == key[0] and np.max(np.abs(key[1:] - warm.sandwich_key[1:])) < _BUDGET_MOVE:
         return warm.sandwich_ratio, warm.sandwich_key
-    return sandwich_ratio(objective, theta, theta_cov, jac, spectra), key
+    return sandwich_ratio(objective, theta, combos, model_cov, spectra), key
 
 
 __all__ = ["FullRefinement", "refine_full", "ridged"]

@@ -23,9 +23,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from rozyn_estimator.method.full.grid import apply
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.full.whittle import FullWhittle
-from rozyn_estimator.method.likelihood.grid import lagrange_weights
+from rozyn_estimator.method.likelihood.grid import lagrange_matrix
 from rozyn_estimator.method.likelihood.score import lag_covariances
 from rozyn_estimator.method.likelihood.spectra import Spectra
 
@@ -36,18 +37,15 @@ _STEP_HZ = 0.2  # the midpoint rule's spacing (measured against 0.1 Hz: the std 
 def fine_spectrum(model: FullCarSpectrum, theta: np.ndarray, spectra: Spectra, reach: int) -> np.ndarray:
     """S (K + 2 reach, k, k) itself (not the periodogram's expectation) at the window's bins
     in the band and ``reach`` bins beyond each of its edges: interpolated from the model's
-    nodes as the fit's S is (:mod:`.grid`), held at the end nodes' values beyond them (the
-    window's few far lags reach past the band by a tenth of a hertz, where S is smooth)."""
+    nodes as the fit's S is (:mod:`.grid`; the few bins beyond the nodes, a tenth of a hertz
+    at most, by the end nodes' polynomials)."""
     df = spectra.fs_hz / spectra.n_samples
     freq = spectra.freq_hz[0] + df * np.arange(-reach, spectra.freq_hz.size + reach)
     if model.grid_hz <= 0:  # S at each target (nearly noise-free data): evaluated at the bins
         return model.regrid(freq, 0.0, 0.0).spectrum(theta, derivatives=False)[0]
     S_nodes, _ = model.node_spectrum(theta, derivatives=False)
-    nodes_hz = model.omega[: model.n_freq] / (2.0 * np.pi)
-    x = (freq - nodes_hz[0]) / model.grid_hz
-    first, weights = lagrange_weights(x, model.n_freq)
-    near = first[:, None] + np.arange(weights.shape[1])
-    return np.einsum("fp,fpab->fab", weights, S_nodes[near])
+    first_node_hz = model.omega[0] / (2.0 * np.pi)
+    return apply(lagrange_matrix((freq - first_node_hz) / model.grid_hz, model.n_freq), S_nodes)
 
 
 def score_covariance(objective: FullWhittle, theta: np.ndarray, combos: np.ndarray,
@@ -81,14 +79,14 @@ def score_covariance(objective: FullWhittle, theta: np.ndarray, combos: np.ndarr
     return 0.5 * (out + out.T)
 
 
-def sandwich_ratio(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndarray, jac: np.ndarray,
+def sandwich_ratio(objective: FullWhittle, theta: np.ndarray, combos: np.ndarray, model_cov: np.ndarray,
                    spectra: Spectra) -> np.ndarray:
-    """(q, q) the sandwich ``jac F⁻¹ Cov(∇ℓ) F⁻¹ jacᵀ`` over the model's std, ``Σ_ij /
-    √(V_ii V_jj)`` with ``V = jac F⁻¹ jacᵀ`` (its diagonal: each parameter's variance factor;
-    dimensionless, so that a warm update can keep it while θ barely moves). The model's own
-    correlation when the window is untapered (the sandwich is then ``V``)."""
-    model_cov = jac @ theta_cov @ jac.T
+    """(q, q) the sandwich ``combos Cov(∇ℓ) combosᵀ`` (``combos = jac F⁻¹``) over the model's
+    std, ``Σ_ij / √(V_ii V_jj)`` with ``V = jac F⁻¹ jacᵀ`` = ``model_cov`` (its diagonal: each
+    parameter's variance factor; dimensionless, so that a warm update can keep it while θ
+    barely moves). The model's own correlation when the window is untapered (the sandwich
+    is then ``V``)."""
     scale = np.sqrt(np.diag(model_cov))
-    sandwich = model_cov if spectra.window_dft.size == 1 else \
-        score_covariance(objective, theta, jac @ theta_cov, spectra)
-    return sandwich / np.outer(scale, scale)
+    if spectra.window_dft.size == 1:
+        return model_cov / np.outer(scale, scale)
+    return score_covariance(objective, theta, combos, spectra) / np.outer(scale, scale)
