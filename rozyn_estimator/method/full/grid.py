@@ -25,7 +25,7 @@ from scipy import sparse
 
 from rozyn_estimator.method.likelihood.grid import lagrange_matrix, map_bins
 
-ALIAS_STEP = 4  # the aliases' nodes: every 4th of the band's (0.2 Hz on the default grid)
+ALIAS_SPACING_HZ = 0.2  # the aliases' nodes, when the band's are on a grid (every 4th of the default's)
 Linear = Callable[[np.ndarray], np.ndarray]  # stacked (..., F, k, k) -> (..., nodes, k, k)
 
 
@@ -52,18 +52,22 @@ def apply(op: sparse.csr_array, m: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(map_bins(op, m))
 
 
-def alias_map(nodes_hz: np.ndarray, step: int) -> tuple[np.ndarray, Linear | None]:
-    """(the aliasing terms' base frequencies: every ``step``-th of the equally spaced
-    ``nodes_hz``, the last at or beyond the end; the interpolation from there to the nodes,
-    None for ``step`` 1: the nodes themselves). The aliases (``f ± fs``, above 85 Hz at
-    100 Hz) are smoother still than the band, and carry a few per mille of its power."""
+def alias_map(nodes_hz: np.ndarray, spacing_hz: float) -> tuple[np.ndarray, Linear | None]:
+    """(the aliasing terms' base frequencies: ``spacing_hz`` apart from the first of the
+    ascending ``nodes_hz``, the last at or beyond the end; the interpolation from there to the
+    nodes, None for ``spacing_hz`` 0 or not sparser than the nodes: the nodes themselves). The
+    aliases (``f ± fs``, above 85 Hz at 100 Hz) are smoother still than the band, and carry a
+    few per mille of its power: a cold start's coarse fit, whose band is at every (mean)
+    frequency, takes them as sparsely as the fine fit."""
     n = nodes_hz.size
-    n_alias = max(8, math.ceil((n - 1) / step) + 1) if step > 1 else n
-    if step <= 1 or n_alias >= n:
+    if spacing_hz <= 0 or n < 2:
         return nodes_hz, None
-    op = lagrange_matrix(np.arange(n) / step, n_alias)
-    spacing = (nodes_hz[-1] - nodes_hz[0]) / (n - 1)
-    return nodes_hz[0] + step * spacing * np.arange(n_alias), lambda s: apply(op, s)
+    x = (nodes_hz - nodes_hz[0]) / spacing_hz  # the nodes' positions in alias spacings
+    n_alias = max(8, math.ceil(x[-1] - 1e-9) + 1)
+    if n_alias >= 0.75 * n:
+        return nodes_hz, None
+    op = lagrange_matrix(x, n_alias)
+    return nodes_hz[0] + spacing_hz * np.arange(n_alias), lambda s: apply(op, s)
 
 
 def extended(freq_hz: np.ndarray) -> np.ndarray:

@@ -31,8 +31,9 @@ coherence is not exactly the isotropic surface's: its one nuisance).
 
 from __future__ import annotations
 
+import contextlib
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -40,7 +41,7 @@ from numpy.polynomial import legendre
 from scipy import sparse, special
 
 from rozyn_estimator.method.full.fit import corner_matrices, corner_matrix_derivatives
-from rozyn_estimator.method.full.grid import ALIAS_STEP, alias_map, apply, evaluation_map
+from rozyn_estimator.method.full.grid import ALIAS_SPACING_HZ, alias_map, apply, evaluation_map
 from rozyn_estimator.method.likelihood.road_input import delay_characteristic
 from rozyn_estimator.vehicle_full import FullVehicle
 
@@ -99,7 +100,7 @@ class FullCarSpectrum:
         self._op_t = None if self._op is None else sparse.csr_array(self._op.T)
         self._row_ops: dict[bytes, sparse.csr_array] = {}  # the map's rows at some frequencies
         self.grid_hz = grid_hz if self._op is not None and nodes.size < self.freq_hz.size else 0.0
-        alias_nodes, self._alias_fold = alias_map(nodes, ALIAS_STEP if self.grid_hz > 0 else 1)
+        alias_nodes, self._alias_fold = alias_map(nodes, ALIAS_SPACING_HZ if grid_hz > 0 else 0.0)
         shifts = np.array([a for a in range(-aliases, aliases + 1) if a != 0], dtype=float) * fs_hz
         self.n_freq, self.n_alias_terms, self.n_alias_nodes = nodes.size, shifts.size, alias_nodes.size
         f = np.r_[nodes, (alias_nodes[None, :] + shifts[:, None]).ravel()]  # the band's nodes, then aliases'
@@ -150,6 +151,18 @@ class FullCarSpectrum:
             one = np.ones_like(phi)
             self.delay = np.stack([one, phi.conj(), phi, one], axis=-1).reshape(-1, 2, 2)  # [[1, φ̄], [φ, 1]]
         self.sensing = self.sensing_of(v, channel_factor)
+
+    @contextlib.contextmanager
+    def assuming(self, vehicle: FullVehicle, channel_factor: np.ndarray | None = None) -> Iterator[None]:
+        """Within the block the model assumes ``vehicle`` (and ``channel_factor``, as
+        :meth:`set_vehicle`); after it, its own again as it was (kept, not recomputed)."""
+        saved = dict(self.__dict__)
+        try:
+            self.set_vehicle(vehicle, channel_factor)
+            yield
+        finally:
+            self.__dict__.clear()
+            self.__dict__.update(saved)
 
     def sensing_of(self, v: FullVehicle, channel_factor: np.ndarray | None = None) -> np.ndarray:
         """iω P (F, k, 3): the sensors' accelerations from the body's velocities (q̇), each
@@ -256,7 +269,7 @@ class FullCarSpectrum:
         return S, dS
 
     def corner_derivatives(self, theta: np.ndarray, directions: np.ndarray) -> np.ndarray:
-        """dS (G, K, k, k) at θ along ``directions`` (G, 22) of the corners' values
+        """dS (G, nodes, k, k) at θ along ``directions`` (G, 22) of the corners' values
         (:func:`~rozyn_estimator.method.full.fit.corner_matrix_derivatives`): ``D = Bᵀ Z B -
         ω² M`` and ``Bᵀ T`` move, so ``dH = D⁻¹ (Bᵀ dT - Bᵀ dZ B H)``, and ``d(H R Hᴴ) = dH R Hᴴ
         + h.c.`` — one batched pass instead of a model evaluation per value."""
@@ -265,16 +278,15 @@ class FullCarSpectrum:
         B = self._body_map
         dH = inv_d @ (B.T @ dT - (B.T @ dZ @ B) @ H)
         part = self.sensing @ (dH @ weighted_inputs @ _h(H)) @ _h(self.sensing)
-        dS = self._fold(part + _h(part))
-        return self.to_targets(dS)
+        return self._fold(part + _h(part))
 
     def sensing_derivatives(self, theta: np.ndarray, d_sensing: np.ndarray) -> np.ndarray:
-        """dS (G, K, k, k) at θ for changes ``d_sensing`` (G, F, k, 3) of :meth:`sensing_of`
+        """dS (G, nodes, k, k) at θ for changes ``d_sensing`` (G, F, k, 3) of :meth:`sensing_of`
         (a sensor's position, gain or timing): S is ``P_s (H R Hᴴ) P_sᴴ`` and the body's
         motion stays."""
         _, _, _, motion, _ = self._body_motion(theta)
         part = d_sensing @ (motion @ _h(self.sensing))
-        return self.to_targets(self._fold(part + _h(part)))
+        return self._fold(part + _h(part))
 
     def _body_motion(self, theta: np.ndarray) -> tuple[np.ndarray, ...]:
         """(D⁻¹, ``H = D⁻¹ Bᵀ T`` (F, 3, 4) the body's response to the wheels' road, the road's

@@ -54,6 +54,7 @@ class FullWhittle:
         self._dS: np.ndarray | None = None  # dS/dθ at the frequencies, when asked
         self._rows: np.ndarray | None = None
         self._hessian: np.ndarray | None = None
+        self._sampled_rows: np.ndarray | None = None
         self.evaluations = 0
 
     def nll(self, S: np.ndarray) -> float:
@@ -76,7 +77,7 @@ class FullWhittle:
         assert dS is not None
         S = self.model.to_targets(S_nodes)
         linv = _inverse_cholesky(S)
-        self._key, self._dS, self._rows, self._hessian = key, None, None, None
+        self._key, self._dS, self._rows, self._hessian, self._sampled_rows = key, None, None, None, None
         if linv is None:
             self._state, self._value = None, (math.inf, np.zeros(self.model.n_params))
             return self._value
@@ -139,11 +140,30 @@ class FullWhittle:
         if self._sub.size == self.counts.size:
             return ridged(self.fisher(theta))
         if self._hessian is None:
-            _, dS_nodes, linv = self._state
-            dS = self.model.to_targets(dS_nodes, self._sub)
-            rows = self.whitened(linv[self._sub], dS, self._sub_root_counts)
+            rows = self.sampled_rows(theta)
             self._hessian = ridged(rows @ rows.T)
         return self._hessian
+
+    def sampled_rows(self, theta: np.ndarray) -> np.ndarray:
+        """:meth:`rows` over every ``_HESSIAN_STEP``-th frequency, each counting for its
+        neighbours (as the optimiser's Hessian), cached; :meth:`rows` for a short band."""
+        if self._sub.size == self.counts.size:
+            return self.rows(theta)
+        self.evaluate(theta)
+        if self._state is None:
+            raise ValueError("the model is not positive definite at θ")
+        if self._sampled_rows is None:
+            _, dS_nodes, linv = self._state
+            self._sampled_rows = self.sampled(dS_nodes, linv)
+        return self._sampled_rows
+
+    def sampled(self, changes: np.ndarray, linv: np.ndarray) -> np.ndarray:
+        """:meth:`whitened` rows of ``changes`` (p, nodes, k, k) of S at the model's nodes, over
+        the frequencies of :meth:`sampled_rows` (``linv`` at every frequency)."""
+        if self._sub.size == self.counts.size:
+            return self.whitened(linv, self.model.to_targets(changes))
+        at = self._sub
+        return self.whitened(linv[at], self.model.to_targets(changes, at), self._sub_root_counts)
 
     def decrement(self, theta: np.ndarray) -> float:
         """The Newton decrement gᵀH⁻¹g (twice the ℓ a scoring step would still gain)."""
