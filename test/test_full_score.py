@@ -109,8 +109,7 @@ def test_a_warm_update_keeps_the_ratio_only_on_a_window_as_long():
     same = estimate_full(y, 100.0, EXACT, PipelineConfig(), 100 / 3.6, warm=cold)
     shorter = estimate_full(y[:-1000], 100.0, EXACT, PipelineConfig(), 100 / 3.6, warm=cold)
     assert cold.refinement is not None and same.refinement is not None and shorter.refinement is not None
-    assert cold.refinement.sandwich_ratio is not None
-    assert same.refinement.sandwich_ratio is cold.refinement.sandwich_ratio
-    assert shorter.refinement.sandwich_key[0] != cold.refinement.sandwich_key[0]
-    assert shorter.refinement.sandwich_ratio is not cold.refinement.sandwich_ratio
+    assert cold.refinement.sandwich is not None and shorter.refinement.sandwich is not None
+    assert same.refinement.sandwich is cold.refinement.sandwich
+    assert shorter.refinement.sandwich.n_samples != cold.refinement.sandwich.n_samples
     np.testing.assert_allclose(same.covariance, cold.covariance, rtol=1e-9)

@@ -50,10 +50,11 @@ from scipy.optimize import OptimizeResult, minimize
 from rozyn_estimator.method.full.blocks import variance_factors
 from rozyn_estimator.method.full.refine_budget import refinement_contributions
 from rozyn_estimator.method.full.score import sandwich_ratio
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum, expected_periodogram_m2
+from rozyn_estimator.method.full.spectrum import BODY_NAMES, FullCarSpectrum, expected_periodogram_m2
 from rozyn_estimator.method.full.whittle import FullWhittle, ridged
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.covariance import NOISE_AT_ZERO
+from rozyn_estimator.method.likelihood.score import SandwichRatio
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, taper_window, window_spectra
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
 
@@ -87,8 +88,7 @@ class FullRefinement:
     contributions: dict[str, np.ndarray] = field(default_factory=dict)  # assumed value -> (5,) per 1 u
     budget_theta: np.ndarray | None = None  # the body parameters θ[:5] the contributions were taken at
     variance_factors: tuple[float, ...] = ()  # the non-stationary road's factors on the model's variances
-    sandwich_ratio: np.ndarray | None = None  # (5, 5) the taper's sandwich over the model's std (.score)
-    sandwich_key: np.ndarray | None = None  # the window's length and θ[:5] it was computed at
+    sandwich: SandwichRatio | None = None  # the taper's sandwich over the model's std (.score), where taken
     elapsed_ms: float = 0.0
     notes: tuple[str, ...] = ()
 
@@ -225,9 +225,9 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     model_cov = combos @ jac.T
     if not (np.all(np.isfinite(model_cov)) and np.all(np.diag(model_cov) > 0)):
         raise _FitError("likelihood fit: covariance not positive")
-    ratio, ratio_key = _sandwich(objective, theta, combos, model_cov, spectra, warm)
+    sandwich = _sandwich(objective, theta, combos, model_cov, spectra, (vehicle, sensors, cfg), warm)
     scale = np.sqrt(np.diag(model_cov))
-    cov = ratio * np.outer(scale, scale)
+    cov = sandwich.ratio * np.outer(scale, scale)
     if not (np.all(np.isfinite(cov)) and np.all(np.diag(cov) > 0)):
         raise _FitError("likelihood fit: covariance not positive")
     factors = variance_factors(objective, theta, combos, cov, spectra, y, share, cfg)
@@ -242,8 +242,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         noise_std_mps2=tuple(np.sqrt(np.exp(theta[model.noise_slice]) * fs).tolist()),
         waviness=float(theta[k["waviness"]]), coherence_scale=float(np.exp(theta[k["ln_coherence_scale"]])),
         contributions=contributions, budget_theta=budget_theta, variance_factors=tuple(factors.tolist()),
-        sandwich_ratio=ratio, sandwich_key=ratio_key,
-        notes=notes)
+        sandwich=sandwich, notes=notes)
 
 
 def _contributions(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndarray, vehicle: FullVehicle,
@@ -367,15 +366,15 @@ def _grid_start(model: FullCarSpectrum, objective: FullWhittle, power: np.ndarra
 
 
 def _sandwich(objective: FullWhittle, theta: np.ndarray, combos: np.ndarray, model_cov: np.ndarray,
-              spectra: Spectra, warm: FullRefinement | None) -> tuple[np.ndarray, np.ndarray]:
-    """(the sandwich's ratio to the model's std, :func:`~.score.sandwich_ratio`; the key it was
-    computed at): the previous window's when it had as many samples and its body parameters
-    were within ``_BUDGET_MOVE`` of these (the ratio is the model's, not the data's)."""
-    key = np.r_[float(spectra.n_samples), theta[:5]]
-    if warm is not None and warm.sandwich_ratio is not None and warm.sandwich_key is not None and \
-            warm.sandwich_key[0] == key[0] and np.max(np.abs(key[1:] - warm.sandwich_key[1:])) < _BUDGET_MOVE:
-        return warm.sandwich_ratio, warm.sandwich_key
-    return sandwich_ratio(objective, theta, combos, model_cov, spectra), key
+              spectra: Spectra, context: tuple[object, ...], warm: FullRefinement | None) -> SandwichRatio:
+    """The sandwich's ratio to the model's std (:func:`~.score.sandwich_ratio`), or the previous
+    window's where it holds (:meth:`SandwichRatio.holds`: as long, θ barely moved, the same
+    vehicle and settings)."""
+    previous = None if warm is None else warm.sandwich
+    if previous is not None and previous.holds(theta, spectra.n_samples, context):
+        return previous
+    return SandwichRatio(sandwich_ratio(objective, theta, combos, model_cov, spectra), theta.copy(),
+                         spectra.n_samples, len(BODY_NAMES), context)
 
 
 __all__ = ["FullRefinement", "refine_full", "ridged"]

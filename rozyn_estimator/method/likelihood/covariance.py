@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 from scipy import fft as sfft
@@ -28,6 +29,7 @@ from scipy.signal import windows
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
 from rozyn_estimator.method.likelihood.objective import WhittleObjective
+from rozyn_estimator.method.likelihood.score import SandwichRatio
 
 NOISE_AT_ZERO = 1e-5  # a noise floor below this share of its channel's band power is zero
 _INCOHERENCE_AT_ZERO = 1e-6
@@ -39,10 +41,12 @@ class CovarianceError(Exception):
 
 def sandwich_covariance(
     objective: WhittleObjective, model: HalfCarSpectrum, theta: np.ndarray, cfg: LikelihoodConfig,
-    accel: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    accel: np.ndarray, previous: SandwichRatio | None = None, context: Any = None,
+) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray], SandwichRatio]:
     """(3, 3) covariance of (m, I, lf) from the data's information at the optimum, the factors
-    the time blocks applied to the model sandwich's variances, and each prior's part.
+    the time blocks applied to the model sandwich's variances, each prior's part, and the
+    model sandwich's ratio to the inverse information (``previous``'s, the last window's,
+    where it holds for ``context`` and the free parameters: :class:`SandwichRatio`).
 
     With priors (the calibrated values' tolerances) the posterior's covariance is
     ``H⁻¹ (J + P) H⁻¹``: the data's part ``H⁻¹ J H⁻¹`` (returned) plus, for each parameter
@@ -64,10 +68,12 @@ def sandwich_covariance(
     keep = kept(objective, model, theta, info)
     inv = inverse_information(info[np.ix_(keep, keep)])
     # Sandwich H⁻¹ J H⁻¹, projected on (m, I, lf) first: B = d(m, I, lf)/dθ H⁻¹.
+    jac = model.physical_jacobian(theta)[:, keep]
     combos = np.zeros((3, theta.size))
-    combos[:, keep] = model.physical_jacobian(theta)[:, keep] @ inv
-    cov = objective.score_covariance(theta, combos)
-    cov = 0.5 * (cov + cov.T)
+    combos[:, keep] = jac @ inv
+    ratio = _model_ratio(objective, theta, combos, jac @ inv @ jac.T, (context, keep.tobytes()), previous)
+    scale = np.sqrt(np.diag(jac @ inv @ jac.T))
+    cov = ratio.ratio * np.outer(scale, scale)
     factors = np.ones(3)
     if cfg.block_weight > 0:
         blocks = _block_variances(objective, theta, combos, accel, cfg.block_s, cfg.taper)
@@ -79,7 +85,19 @@ def sandwich_covariance(
     if objective.prior is not None:  # the prior's share of the posterior's information
         for j in np.flatnonzero(objective.prior.precision):
             parts[model.names[j]] = combos[:, j] * math.sqrt(objective.prior.precision[j])
-    return cov, factors, parts
+    return cov, factors, parts, ratio
+
+
+def _model_ratio(objective: WhittleObjective, theta: np.ndarray, combos: np.ndarray, model_cov: np.ndarray,
+                 context: Any, previous: SandwichRatio | None) -> SandwichRatio:
+    """``combos J combosᵀ`` (J the score's covariance under the model) over the model's std
+    ``√diag(model_cov)``, or ``previous`` where it holds."""
+    n = objective.spectra.n_samples
+    if previous is not None and previous.holds(theta, n, context):
+        return previous
+    cov = objective.score_covariance(theta, combos)
+    scale = np.sqrt(np.diag(model_cov))
+    return SandwichRatio(0.5 * (cov + cov.T) / np.outer(scale, scale), theta.copy(), n, 3, context)
 
 
 def kept(

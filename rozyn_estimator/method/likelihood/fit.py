@@ -47,6 +47,7 @@ from rozyn_estimator.method.likelihood.fitcheck import ModelFit, model_fit
 from rozyn_estimator.method.likelihood.model import CORNERS, HalfCarSpectrum
 from rozyn_estimator.method.likelihood.newton import Fits, noise_share
 from rozyn_estimator.method.likelihood.objective import WhittleObjective
+from rozyn_estimator.method.likelihood.score import SandwichRatio
 from rozyn_estimator.method.likelihood.sensitivity import Sensitivities
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, fast_length, window_spectra
 from rozyn_estimator.method.likelihood.uncertainty import uncertainty
@@ -80,6 +81,7 @@ class Refinement:
     model_fit: ModelFit | None = None  # the goodness-of-fit check
     contributions: dict[str, np.ndarray] = field(default_factory=dict)  # assumed value -> (3,) per 1 u
     sensitivities: Sensitivities | None = None  # of the values left assumed, where they were taken
+    sandwich: SandwichRatio | None = None  # the model sandwich's ratio, where it was taken
     elapsed_ms: float = 0.0
     notes: tuple[str, ...] = field(default=())
 
@@ -234,8 +236,9 @@ def _refine(
     try:
         _check_noise(theta, objective, cfg)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # not finite: _check refuses it
-            found = uncertainty(objective, model, theta, vehicle, cfg, y,
-                                warm.sensitivities if isinstance(warm, Refinement) else None)
+            previous = warm if isinstance(warm, Refinement) else None
+            found = uncertainty(objective, model, theta, vehicle, cfg, y, previous and previous.sensitivities,
+                                previous and previous.sandwich)
         if not found.converged:
             notes.append(f"likelihood calibration: not converged in {cfg.max_iter} iterations")
         _check(found.params, found.covariance, L)
@@ -256,6 +259,7 @@ def _refine(
         else (),
         variance_factors=tuple(found.factors.tolist()), notes=tuple(notes), calibration=found.calibration,
         contributions=found.contributions, model_fit=fit, sensitivities=found.sensitivities,
+        sandwich=found.sandwich,
     )
 
 

@@ -26,6 +26,7 @@ from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.covariance import sandwich_covariance
 from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
 from rozyn_estimator.method.likelihood.objective import WhittleObjective
+from rozyn_estimator.method.likelihood.score import SandwichRatio
 from rozyn_estimator.method.likelihood.sensitivity import Sensitivities, sensitivities_near
 from rozyn_estimator.vehicle import Vehicle
 
@@ -42,15 +43,18 @@ class Uncertainty:
     objective: WhittleObjective  # the (calibrated) posterior's
     theta: np.ndarray  # its parameters at the estimate
     sensitivities: Sensitivities  # of the values left assumed (the next window's may reuse them)
+    sandwich: SandwichRatio  # the model sandwich's ratio (the next window's may reuse it)
     converged: bool = True  # False: the calibration's optimiser stopped at its iteration limit
 
 
 def uncertainty(
     objective: WhittleObjective, model: HalfCarSpectrum, theta: np.ndarray, vehicle: Vehicle,
     cfg: LikelihoodConfig, accel: np.ndarray, previous: Sensitivities | None = None,
+    previous_sandwich: SandwichRatio | None = None,
 ) -> Uncertainty:
     """The budget of the fit's optimum ``theta`` (raises CovarianceError when there is none);
-    ``previous``: the last window's sensitivities (kept while θ has barely moved)."""
+    ``previous`` and ``previous_sandwich``: the last window's sensitivities and sandwich ratio
+    (kept while θ has barely moved)."""
     todo = plan(vehicle, model)
     stds: dict[str, float] = {}
     start = stepped = theta
@@ -59,14 +63,15 @@ def uncertainty(
         aug = calibrate(objective, model, theta, vehicle, todo, cfg.max_iter)
         objective, model, start, stepped, stds = aug.objective, aug.model, aug.point, aug.stepped, aug.stds
         converged = aug.converged
-    cov, factors, parts = sandwich_covariance(objective, model, start, cfg, accel)
+    cov, factors, parts, ratio = sandwich_covariance(objective, model, start, cfg, accel, previous_sandwich,
+                                                     (vehicle, cfg))
     contributions = {(CALIBRATED.get(name) or POSITION_KEYS[name]): c for name, c in parts.items()}
     assumed = _assumed(vehicle, cfg, set(contributions))
     sens = sensitivities_near(objective, model, start, list(assumed), vehicle, cfg, previous)
     contributions |= {key: sens.per_unit[key] * u for key, u in assumed.items()}
     found = calibration(objective, model, start, stepped, stds)
     return Uncertainty(model.physical(stepped), cov, factors, contributions, found, objective, stepped, sens,
-                       converged)
+                       ratio, converged)
 
 
 def _assumed(vehicle: Vehicle, cfg: LikelihoodConfig, calibrated: set[str]) -> dict[str, float]:
