@@ -29,3 +29,16 @@ def test_bench_reports_the_refined_studys_rate_next_to_the_others(monkeypatch):
     assert studies == [(2, "", "fixed", 0.0), (1, "likelihood", "gaussian", 0.1)]  # the refined grid's roads
     # the full car's refined update per the half car's (issue 13: <= 3x), from the same run
     assert out["full_refined_warm_per_half"] == 1.0 and out["goals"]["full_refined_warm_per_half"] == 3.0
+
+
+def test_the_node_benchs_medians_over_all_updates_and_over_the_full_windows():
+    """``rozyn bench --nodes`` reports the latency and the pipeline's time over every update
+    and over the full windows' only (a drive's steady state), matched by the update's stamp."""
+    from rozyn_estimator.tools.node_bench import _medians
+
+    latency = {1: 50.0, 2: 40.0, 3: 30.0, 4: 20.0}
+    pipeline = {1: 45.0, 3: 25.0, 4: 15.0}  # update 2's diagnostics never arrived
+    assert _medians(latency, pipeline, list(latency), "") == {"update_latency_ms_median": 35.0,
+                                                             "pipeline_ms_median": 25.0}
+    assert _medians(latency, pipeline, [3, 4], "_full_window") == {
+        "update_latency_ms_median_full_window": 25.0, "pipeline_ms_median_full_window": 20.0}
