@@ -38,7 +38,7 @@ DESCRIPTION = None  # ``rozyn bench --help``: the usage and the options only
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--repeats", type=int, default=20, help="timing repeats (default: 20)")
     p.add_argument("--nodes", action="store_true",
-                   help="instead: the estimator node under load over DDS (about 3 minutes)")
+                   help="instead: the estimator node under load over DDS (about 8 minutes)")
     p.add_argument("--quick", action="store_true", help="with --nodes: shorter runs (about 1 minute)")
     p.add_argument("--silent-sensor", action="store_true",
                    help="instead: memory over an hour of 1 kHz front samples, the rear silent (seconds)")

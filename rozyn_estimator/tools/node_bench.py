@@ -12,7 +12,9 @@ and memory (psutil). Figures:
   the arrival of the estimate here (transport, queue, pipeline and publication), with the
   default window (120 s, filling from 30 s) and schedule (every 5 s), with the refinement
   (the default) and with Rozyn's stage only
-  (``pipeline.refine: none``); ``pipeline_ms`` is the pipeline's own part of it;
+  (``pipeline.refine: none``); ``pipeline_ms`` is the pipeline's own part of it; at
+  2 x 100 Hz the run goes on past the window's fill, and ``*_full_window`` are the medians
+  over the full windows alone (a drive's steady state);
 - ``rss``: the node's resident memory through 10 minutes of sim time at 2 x 100 Hz
   (the simulator on sim time at 20x).
 """
