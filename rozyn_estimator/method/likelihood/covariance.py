@@ -71,8 +71,8 @@ def sandwich_covariance(
     jac = model.physical_jacobian(theta)[:, keep]
     combos = np.zeros((3, theta.size))
     combos[:, keep] = jac @ inv
-    ratio = _model_ratio(objective, theta, combos, jac @ inv @ jac.T, (context, keep.tobytes()), previous)
-    scale = np.sqrt(np.diag(jac @ inv @ jac.T))
+    scale = np.sqrt(np.diag(jac @ inv @ jac.T))  # the inverse information's std
+    ratio = _model_ratio(objective, theta, combos, scale, (context, keep.tobytes()), previous)
     cov = ratio.ratio * np.outer(scale, scale)
     factors = np.ones(3)
     if cfg.block_weight > 0:
@@ -88,15 +88,14 @@ def sandwich_covariance(
     return cov, factors, parts, ratio
 
 
-def _model_ratio(objective: WhittleObjective, theta: np.ndarray, combos: np.ndarray, model_cov: np.ndarray,
+def _model_ratio(objective: WhittleObjective, theta: np.ndarray, combos: np.ndarray, scale: np.ndarray,
                  context: Any, previous: SandwichRatio | None) -> SandwichRatio:
-    """``combos J combosᵀ`` (J the score's covariance under the model) over the model's std
-    ``√diag(model_cov)``, or ``previous`` where it holds."""
+    """``combos J combosᵀ`` (J the score's covariance under the model) over the inverse
+    information's std ``scale`` (3,), or ``previous`` where it holds."""
     n = objective.spectra.n_samples
     if previous is not None and previous.holds(theta, n, context):
         return previous
     cov = objective.score_covariance(theta, combos)
-    scale = np.sqrt(np.diag(model_cov))
     return SandwichRatio(0.5 * (cov + cov.T) / np.outer(scale, scale), theta.copy(), n, 3, context)
 
 

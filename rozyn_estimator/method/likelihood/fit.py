@@ -236,9 +236,8 @@ def _refine(
     try:
         _check_noise(theta, objective, cfg)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # not finite: _check refuses it
-            previous = warm if isinstance(warm, Refinement) else None
-            found = uncertainty(objective, model, theta, vehicle, cfg, y, previous and previous.sensitivities,
-                                previous and previous.sandwich)
+            carried = (warm.sensitivities, warm.sandwich) if isinstance(warm, Refinement) else (None, None)
+            found = uncertainty(objective, model, theta, vehicle, cfg, y, *carried)
         if not found.converged:
             notes.append(f"likelihood calibration: not converged in {cfg.max_iter} iterations")
         _check(found.params, found.covariance, L)
