@@ -27,7 +27,7 @@ from rozyn_estimator.method.full.grid import apply
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.full.whittle import FullWhittle
 from rozyn_estimator.method.likelihood.grid import lagrange_matrix
-from rozyn_estimator.method.likelihood.score import lag_covariances
+from rozyn_estimator.method.likelihood.score import lag_covariances, lag_partners, midpoint_bins
 from rozyn_estimator.method.likelihood.spectra import Spectra
 
 _STEP_HZ = 0.2  # the midpoint rule's spacing (measured against 0.1 Hz: the std within 0.3 %
@@ -61,16 +61,10 @@ def score_covariance(objective: FullWhittle, theta: np.ndarray, combos: np.ndarr
     A = (inv @ np.tensordot(combos, dS, axes=1) @ inv).astype(np.complex64)  # (q, groups, k, k)
     group = np.repeat(np.arange(S.shape[0]), objective.counts.astype(int))  # each bin's group
     K = group.size
-    step = max(1, int(_STEP_HZ * spectra.n_samples / spectra.fs_hz))
-    starts = np.arange(0, K, step)
-    counts = np.diff(np.r_[starts, K])
-    bins = starts + (counts - 1) // 2
+    starts, counts, bins = midpoint_bins(K, int(_STEP_HZ * spectra.n_samples / spectra.fs_hz))
     lags, C = lag_covariances(fine_spectrum(objective.model, theta, spectra, reach), w_hat, bins)
     C = C.astype(np.complex64)  # (n_δ, kc, k, k)
-    # the bins of each block whose partner k + δ lies in the band, counted exactly
-    ends = np.minimum(starts + counts, K - lags[:, None])
-    weight = np.maximum(0, ends - np.maximum(starts, -lags[:, None]))
-    partner = np.clip(bins[None, :] + lags[:, None], 0, K - 1)
+    partner, weight = lag_partners(starts, counts, bins, lags, K)
     q = combos.shape[0]
     left = A[:, group[bins]][:, None] @ C[None]  # (q, n_δ, kc, k, k): A_k C_kk'
     # tr(A_k C A_k' Cᴴ) = Σ left ⊙ (A_k' Cᴴ)ᵀ, and (A_k' Cᴴ)ᵀ = conj(C A_k') for Hermitian A

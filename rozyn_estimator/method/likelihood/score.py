@@ -72,6 +72,23 @@ def lag_covariances(
     return lags, C.reshape(lags.size, bins.size, *S_ext.shape[1:])
 
 
+def midpoint_bins(n_bins: int, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The midpoint rule's blocks of ``step`` bins over ``n_bins``: (first bins, sizes, centre bins)."""
+    starts = np.arange(0, n_bins, max(1, step))
+    counts = np.diff(np.r_[starts, n_bins])
+    return starts, counts, starts + (counts - 1) // 2
+
+
+def lag_partners(starts: np.ndarray, counts: np.ndarray, bins: np.ndarray, lags: np.ndarray,
+                 n_bins: int) -> tuple[np.ndarray, np.ndarray]:
+    """(each centre bin's partner ``k + δ`` per lag, clipped to the band; the bins of each
+    block whose partner lies in the band, counted exactly: the band's edges are where the
+    summand is not smooth), both (n_δ, blocks)."""
+    ends = np.minimum(starts + counts, n_bins - lags[:, None])
+    weight = np.maximum(0, ends - np.maximum(starts, -lags[:, None]))
+    return np.clip(bins[None, :] + lags[:, None], 0, n_bins - 1), weight
+
+
 def _hermitian_numbers(A: np.ndarray) -> np.ndarray:
     """(..., 4) real numbers (a, d, Re b, Im b) of Hermitian 2x2 ``[[a, b], [b̄, d]]`` (..., 2, 2)."""
     return np.stack([A[..., 0, 0].real, A[..., 1, 1].real, A[..., 0, 1].real, A[..., 0, 1].imag], axis=-1)
@@ -102,17 +119,11 @@ def covariance_sum(A: np.ndarray, S_ext: np.ndarray, w_hat: np.ndarray, step: in
     bilinear form ``h(A_ik)ᵀ Lᵀ h(A_(j,k+δ))`` (:func:`_congruence`).
     """
     q, k = A.shape[:2]
-    starts = np.arange(0, k, max(1, step))
-    counts = np.diff(np.r_[starts, k])
-    bins = starts + (counts - 1) // 2
+    starts, counts, bins = midpoint_bins(k, step)
     lags, C = lag_covariances(S_ext, w_hat, bins)
     h = _hermitian_numbers(A)  # (q, k, 4)
     g = np.matmul(_congruence(C), h[:, bins, :, None][:, None])[..., 0]  # (q, n_δ, kc, 4): each L h
-    partner = bins[None, :] + lags[:, None]
-    # the bins of each block whose partner k + δ lies in the band, counted exactly (the
-    # band's edges are where the summand is not smooth)
-    ends = np.minimum(starts + counts, k - lags[:, None])
-    weight = np.maximum(0, ends - np.maximum(starts, -lags[:, None]))  # (n_δ, kc)
-    other = h[:, np.clip(partner, 0, k - 1)] * weight[None, :, :, None]  # (q, n_δ, kc, 4)
+    partner, weight = lag_partners(starts, counts, bins, lags, k)
+    other = h[:, partner] * weight[None, :, :, None]  # (q, n_δ, kc, 4)
     out = g.reshape(q, -1) @ other.reshape(q, -1).T
     return 0.5 * (out + out.T)
