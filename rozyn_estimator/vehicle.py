@@ -13,7 +13,7 @@ to 0 (on the axles). Pitch ``phi`` is positive nose up, so a point at ``x`` move
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, ClassVar
@@ -207,7 +207,9 @@ def _yaml_shape_problem(text: str) -> str | None:
     depth: list[tuple[str | None, int]] = []  # the open collections: (anchor, nodes before)
     sizes: dict[str, int] = {}  # anchor -> nodes under it
     nodes = 0
-    for event in yaml.parse(text, Loader=_LOADER):
+    for event in _events(text):
+        if event is None:
+            return f"nested deeper than {MAX_YAML_DEPTH} levels"
         if isinstance(event, yaml.CollectionStartEvent):
             depth.append((event.anchor, nodes))
             nodes += 1
@@ -226,6 +228,18 @@ def _yaml_shape_problem(text: str) -> str | None:
         if nodes > MAX_YAML_NODES:
             return f"more than {MAX_YAML_NODES} values (aliases counted as what they repeat)"
     return None
+
+
+def _events(text: str) -> Iterator[yaml.Event | None]:
+    """``yaml.parse``'s events, then None where PyYAML (>= 6.0.4) refuses a nesting deeper
+    than its own limit: its scanner looks ahead of the events, so that limit can strike
+    before :func:`_yaml_shape_problem` has counted MAX_YAML_DEPTH levels."""
+    try:
+        yield from yaml.parse(text, Loader=_LOADER)
+    except yaml.MarkedYAMLError as exc:
+        if "nesting depth" not in str(exc.problem or ""):
+            raise
+        yield None
 
 
 def load_vehicle(path: str | Path) -> Vehicle:
