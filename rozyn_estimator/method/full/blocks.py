@@ -36,7 +36,11 @@ from scipy import fft as sfft
 
 from rozyn_estimator.method.full.whittle import FullWhittle
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
-from rozyn_estimator.method.likelihood.covariance import series_block_variances
+from rozyn_estimator.method.likelihood.covariance import (
+    channel_products,
+    matrices_times_vectors,
+    series_block_variances,
+)
 from rozyn_estimator.method.likelihood.spectra import Spectra
 
 
@@ -63,9 +67,9 @@ def block_factors(objective: FullWhittle, theta: np.ndarray, combos: np.ndarray,
     if cfg.block_weight <= 0 or d is None or not np.all(np.diag(cov) > 0):
         return ones
     A = np.repeat(_score_kernels(objective, theta, combos), objective.counts.astype(int), axis=1)
-    filtered = _band_samples(spectra, np.einsum("qkab,kb->qka", A, d))
+    filtered = _band_samples(spectra, matrices_times_vectors(A, d))
     y_band = _band_samples(spectra, d[None])[0] if samples is None else samples
-    psi = np.einsum("ta,qta->qt", y_band, filtered) / (2.0 * spectra.fs_hz)
+    psi = channel_products(y_band, filtered) / (2.0 * spectra.fs_hz)
     blocks = series_block_variances(psi, accel, spectra.fs_hz, cfg.block_s, cfg.taper)
     if blocks is None:
         return ones
