@@ -3,6 +3,8 @@ they measure is each figure's own business, and the full bench takes minutes).""
 
 from __future__ import annotations
 
+import pytest
+
 from rozyn_estimator.tools import bench
 
 KEYS = ("sim_100s_at_100hz_ms", "road_generation_ms", "update_120s_window_ms",
@@ -21,14 +23,39 @@ def test_bench_reports_the_refined_studys_rate_next_to_the_others(monkeypatch):
         studies.append((repeats, method, amplitudes, noise))
         return 10.0 if method else 100.0
 
+    def paired(fns, repeats: int) -> list[float]:
+        assert len(fns) == 2  # the full car's update, then the half car's
+        return [3.0, 1.5]
+
     monkeypatch.setattr(bench, "_median_ms", lambda fn, repeats: 1.0)
+    monkeypatch.setattr(bench, "_paired_ms", paired)
     monkeypatch.setattr(bench, "_study_trials_per_second", study_rate)
     out = bench.run_bench(repeats=20)
     assert tuple(out) == KEYS
     assert out["study_trials_per_second"] == 100.0 and out["study_refined_trials_per_second"] == 10.0
     assert studies == [(2, "", "fixed", 0.0), (1, "likelihood", "gaussian", 0.1)]  # the refined grid's roads
-    # the full car's refined update per the half car's (issue 13: <= 3x), from the same run
-    assert out["full_refined_warm_per_half"] == 1.0 and out["goals"]["full_refined_warm_per_half"] == 3.0
+    # the full car's refined update per the half car's (issue 13: <= 3x), timed in turn with it
+    assert out["full_refined_update_cold_ms"] == 3.0 and out["full_refined_cold_per_half"] == 2.0
+    assert out["full_refined_warm_per_half"] == 2.0 and out["goals"]["full_refined_warm_per_half"] == 3.0
+
+
+def test_paired_timings_run_the_functions_in_turn_and_report_each_ones_median(monkeypatch):
+    """Each repeat runs every function once, in order (a ratio then compares runs made moments
+    apart on a machine whose speed drifts); each gets the median of its own times."""
+    clock = [0.0]
+    calls: list[str] = []
+
+    def work(name: str, seconds: list[float]):
+        def run() -> None:
+            calls.append(name)
+            clock[0] += seconds.pop(0)
+        return run
+
+    monkeypatch.setattr(bench.time, "perf_counter", lambda: clock[0])
+    slow = work("full", [9.0, 0.003, 0.004, 0.100])  # the first is the warm-up
+    fast = work("half", [9.0, 0.001, 0.002, 0.001])
+    assert bench._paired_ms([slow, fast], repeats=3) == pytest.approx([4.0, 1.0])
+    assert calls == ["full", "half"] * 4
 
 
 def test_the_node_benchs_medians_over_all_updates_and_over_the_full_windows():

@@ -17,7 +17,7 @@ import resource
 import statistics
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -68,9 +68,26 @@ def _median_ms(fn: Callable[[], Any], repeats: int) -> float:
     return statistics.median(times)
 
 
-def _full_car_figures(repeats: int, half_warm_ms: float, half_cold_ms: float) -> dict[str, float]:
+def _paired_ms(fns: Sequence[Callable[[], Any]], repeats: int) -> list[float]:
+    """Median times [ms] of ``fns`` run in turn within each repeat: a ratio of two of them
+    then compares runs made moments apart (this machine's speed drifts within a run: two
+    medians taken a minute apart gave a ratio between 2.5 and 3.5 for the same code)."""
+    for fn in fns:
+        fn()
+    times: list[list[float]] = [[] for _ in fns]
+    for _ in range(repeats):
+        for fn, out in zip(fns, times, strict=True):
+            t0 = time.perf_counter()
+            fn()
+            out.append((time.perf_counter() - t0) * 1e3)
+    return [statistics.median(t) for t in times]
+
+
+def _full_car_figures(repeats: int, half_warm: Callable[[], Any],
+                      half_cold: Callable[[], Any]) -> dict[str, float]:
     """The full car's refined update (120 s, 100 Hz, four sensors, the default tolerances'
-    budget) cold and warm, and per the half car's in the same run (issue 13: <= 3x)."""
+    budget) cold and warm, and per the half car's (``half_warm``, ``half_cold``: its updates)
+    timed in turn with it (issue 13: <= 3x)."""
     vehicle = FullVehicle()
     live = Simulation(SimConfig(model="full", full_vehicle=vehicle, road=RoadSpec(amplitudes="gaussian"),
                                 seed=3, noise_std_mps2=0.05))
@@ -78,14 +95,17 @@ def _full_car_figures(repeats: int, half_warm_ms: float, half_cold_ms: float) ->
     nxt = np.vstack([window[500:], live.run(5.0).accel_mps2])
     speed = live.config.speed_mps
     warm = estimate_full(window, 100.0, vehicle, PipelineConfig(), speed)
-    out = {"full_refined_update_cold_ms": _median_ms(
-               lambda: estimate_full(window, 100.0, vehicle, PipelineConfig(), speed), max(3, repeats // 4)),
-           "full_refined_update_warm_ms": _median_ms(
-               lambda: estimate_full(nxt, 100.0, vehicle, PipelineConfig(), speed, warm=warm),
-               max(3, repeats // 2))}
-    out["full_refined_warm_per_half"] = out["full_refined_update_warm_ms"] / half_warm_ms
-    out["full_refined_cold_per_half"] = out["full_refined_update_cold_ms"] / half_cold_ms
-    return out
+    def full_cold() -> Any:
+        return estimate_full(window, 100.0, vehicle, PipelineConfig(), speed)
+
+    def full_warm() -> Any:
+        return estimate_full(nxt, 100.0, vehicle, PipelineConfig(), speed, warm=warm)
+
+    cold_ms, half_cold_ms = _paired_ms([full_cold, half_cold], max(5, repeats // 2))
+    warm_ms, half_warm_ms = _paired_ms([full_warm, half_warm], repeats)
+    return {"full_refined_update_cold_ms": cold_ms, "full_refined_update_warm_ms": warm_ms,
+            "full_refined_warm_per_half": warm_ms / half_warm_ms,
+            "full_refined_cold_per_half": cold_ms / half_cold_ms}
 
 
 def _peak_rss_mb() -> float:
@@ -143,7 +163,9 @@ def run_bench(repeats: int = 20) -> dict[str, Any]:
     out["budget_overhead_pct"] = 100.0 * (
         out["refined_update_warm_ms"] / out["refined_update_warm_without_budget_ms"] - 1.0)
     out["glitch_per_clean_update"] = out["glitch_update_warm_ms"] / out["refined_update_warm_ms"]
-    out |= _full_car_figures(repeats, out["refined_update_warm_ms"], out["refined_update_cold_ms"])
+    out |= _full_car_figures(
+        repeats, lambda: estimate(nxt, 100.0, vehicle, PipelineConfig(), speed, warm_start=warm),
+        lambda: estimate(window, 100.0, vehicle, PipelineConfig(), speed))
     out["peak_rss_mb"] = _peak_rss_mb()
     out["goals"] = {"sim_100s_at_100hz_ms": 20.0, "update_120s_window_ms": 10.0,
                     "refined_update_warm_ms": 20.0, "refined_update_cold_ms": 60.0,
