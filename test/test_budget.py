@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 
 import numpy as np
 import pytest
@@ -135,6 +136,17 @@ def test_a_model_fit_check_on_a_singular_spectrum_is_not_computable_not_fits(cle
     record = fit.to_dict()
     assert record["statistic"] is None and record["p"] is None
     json.dumps(record, allow_nan=False)  # valid JSON
+
+
+def test_a_model_fit_check_whose_statistic_is_not_a_number_gives_no_verdict(clean, monkeypatch):
+    """Whatever makes the statistic NaN or infinite, the check says it could not be computed:
+    a NaN's p-value is never below the threshold, which would otherwise read as "fits"."""
+    from rozyn_estimator.method.likelihood import fitcheck
+
+    monkeypatch.setattr(fitcheck, "_neighbour_correlation", lambda window_dft: math.nan)
+    fit = refine(clean, 100.0, EXACT, START, SPEED).model_fit
+    assert fit is not None and not fit.ok and fit.verdict == fitcheck.NOT_COMPUTABLE
+    assert fit.to_dict()["statistic"] is None
 
 
 def test_budget_groups_and_text():

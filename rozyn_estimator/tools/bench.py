@@ -95,6 +95,7 @@ def _full_car_figures(repeats: int, half_warm: Callable[[], Any],
     nxt = np.vstack([window[500:], live.run(5.0).accel_mps2])
     speed = live.config.speed_mps
     warm = estimate_full(window, 100.0, vehicle, PipelineConfig(), speed)
+
     def full_cold() -> Any:
         return estimate_full(window, 100.0, vehicle, PipelineConfig(), speed)
 

@@ -100,6 +100,8 @@ def model_fit(objective: WhittleObjective, theta: np.ndarray, n_free: int,
     per_band = list(2.0 * counts / kappa * full)
     cross_share = list(np.where(full > 0, 1.0 - auto / np.where(full > 0, full, 1.0), 0.0))
     statistic = float(np.sum(per_band))
+    if not math.isfinite(statistic):  # never a verdict from a statistic that is not a number
+        return ModelFit(math.nan, dof, math.nan, (float(f[0]), float(f[-1])), NOT_COMPUTABLE)
     p = float(special.chdtrc(dof, statistic))  # the χ² tail (stats.chi2.sf's, without its overhead)
     worst = int(np.argmax(per_band))
     band = (float(edges[worst]), float(min(edges[worst + 1], f[-1])))
