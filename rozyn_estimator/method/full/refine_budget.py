@@ -45,7 +45,7 @@ def refinement_contributions(objective: FullWhittle, theta: np.ndarray, theta_co
     """Contributions ``c_j`` (5,) of each toleranced value of ``vehicle`` to the refined estimate."""
     model = objective.model
     _, _, linv = objective.at(theta)
-    S = model.node_spectrum(theta, derivatives=False)[0]
+    S = objective.node_spectrum(theta)
     jac = model.physical_jacobian(theta)
     moves = [(name, step, move(step), tol) for key, tol in vehicle.tolerances.to_dict().items() if tol > 0
              for name, step, move in _moves(vehicle, model, key)]

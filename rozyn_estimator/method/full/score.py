@@ -24,7 +24,6 @@ from __future__ import annotations
 import numpy as np
 
 from rozyn_estimator.method.full.grid import apply
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.full.whittle import FullWhittle
 from rozyn_estimator.method.likelihood.grid import lagrange_matrix
 from rozyn_estimator.method.likelihood.score import lag_covariances, lag_partners, midpoint_bins
@@ -34,16 +33,17 @@ _STEP_HZ = 0.2  # the midpoint rule's spacing (measured against 0.1 Hz: the std 
 # at 120 s and 4 % at 30 s; the half car's 0.1 Hz would double the work)
 
 
-def fine_spectrum(model: FullCarSpectrum, theta: np.ndarray, spectra: Spectra, reach: int) -> np.ndarray:
+def fine_spectrum(objective: FullWhittle, theta: np.ndarray, spectra: Spectra, reach: int) -> np.ndarray:
     """S (K + 2 reach, k, k) itself (not the periodogram's expectation) at the window's bins
     in the band and ``reach`` bins beyond each of its edges: interpolated from the model's
     nodes as the fit's S is (:mod:`.grid`; the few bins beyond the nodes, a tenth of a hertz
     at most, by the end nodes' polynomials)."""
+    model = objective.model
     df = spectra.fs_hz / spectra.n_samples
     freq = spectra.freq_hz[0] + df * np.arange(-reach, spectra.freq_hz.size + reach)
     if model.grid_hz <= 0:  # S at each target (nearly noise-free data): evaluated at the bins
         return model.regrid(freq, 0.0, 0.0).spectrum(theta, derivatives=False)[0]
-    S_nodes, _ = model.node_spectrum(theta, derivatives=False)
+    S_nodes = objective.node_spectrum(theta)
     first_node_hz = model.omega[0] / (2.0 * np.pi)
     return apply(lagrange_matrix((freq - first_node_hz) / model.grid_hz, model.n_freq), S_nodes)
 
@@ -62,7 +62,7 @@ def score_covariance(objective: FullWhittle, theta: np.ndarray, combos: np.ndarr
     group = np.repeat(np.arange(S.shape[0]), objective.counts.astype(int))  # each bin's group
     K = group.size
     starts, counts, bins = midpoint_bins(K, int(_STEP_HZ * spectra.n_samples / spectra.fs_hz))
-    lags, C = lag_covariances(fine_spectrum(objective.model, theta, spectra, reach), w_hat, bins)
+    lags, C = lag_covariances(fine_spectrum(objective, theta, spectra, reach), w_hat, bins)
     C = C.astype(np.complex64)  # (n_δ, kc, k, k)
     partner, weight = lag_partners(starts, counts, bins, lags, K)
     q = combos.shape[0]

@@ -55,6 +55,7 @@ class FullWhittle:
         self._rows: np.ndarray | None = None
         self._hessian: np.ndarray | None = None
         self._sampled_rows: np.ndarray | None = None
+        self._S_nodes: np.ndarray | None = None  # S at the model's nodes at the last evaluation
         self.evaluations = 0
 
     def nll(self, S: np.ndarray) -> float:
@@ -78,6 +79,7 @@ class FullWhittle:
         S = self.model.to_targets(S_nodes)
         linv = _inverse_cholesky(S)
         self._key, self._dS, self._rows, self._hessian, self._sampled_rows = key, None, None, None, None
+        self._S_nodes = S_nodes
         if linv is None:
             self._state, self._value = None, (math.inf, np.zeros(self.model.n_params))
             return self._value
@@ -92,6 +94,13 @@ class FullWhittle:
 
     def jac(self, theta: np.ndarray) -> np.ndarray:
         return self.evaluate(theta)[1]
+
+    def node_spectrum(self, theta: np.ndarray) -> np.ndarray:
+        """S at the model's nodes at θ (the evaluation's: the budget's moves and the score's
+        covariance start from it)."""
+        self.evaluate(theta)
+        assert self._S_nodes is not None
+        return self._S_nodes
 
     def at(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(S, dS/dθ, L⁻¹) at θ and the periodograms' frequencies (raises ValueError where S is
