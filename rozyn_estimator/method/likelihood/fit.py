@@ -202,7 +202,7 @@ def _refine(
     if warm_theta is not None:
         # Warm: the previous optimum. The guard (the given start, or the grid's best) runs
         # only when the result disagrees with the start.
-        fits.run(warm_theta)
+        fits.run(warm_theta, warm=True)
         first = fits.best  # None: no finite likelihood, which agrees with nothing
         if cfg.second_start and (first is None or not _agrees(model.physical(first.x), start, start_std)):
             fits.run(_start_theta(model, spectra, given, cfg.noise_start) if given is not None else

@@ -2,11 +2,19 @@
 kept; each first in the fast mode (derivatives at the model's nodes, see
 :class:`WhittleObjective`), then at every bin where that does not converge; the stopping
 rules (the Newton decrement over the parameters not at a boundary, a stall).
+
+A warm start (the previous window's optimum) is usually one step from this window's: its
+first step is taken as scipy's trust region would take it (the Newton step when it lies
+within the initial trust radius, accepted when ℓ falls by more than ``_ACCEPT`` of what the
+quadratic model predicts), but the proposed point is evaluated at every bin at once, where
+the convergence test and the calibration that follows need it anyway: the fast mode's
+evaluation there and the optimiser's set-up are saved (~2.5 ms of a 25 ms update).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import LinAlgError, cho_factor, cho_solve
 from scipy.optimize import OptimizeResult, minimize
 
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
@@ -16,6 +24,10 @@ from rozyn_estimator.method.likelihood.objective import WhittleObjective
 _FAST_ITERATIONS = 30  # the fast iterations' share of max_iter (noisy data converge in ~5-25)
 _STALL_ITERATIONS = 10  # iterations without progress that end a fit (see _stalled)
 _STALLED_TOL = 100.0  # a stalled fit counts as converged with its decrement below this many tol
+_TRUST = 1.0  # a warm start's first step: at most this long (scipy's initial trust radius)
+_ACCEPT = 0.15  # ... and taken when ℓ falls by more than this share of the predicted fall (its eta)
+_NEAR_STEPS = 10.0  # on at every bin from there when its Newton decrement is below this (a step or
+# two: each costs more than a fast one), else in the fast mode (a start far off, e.g. the road changed)
 
 
 def noise_share(theta: np.ndarray, objective: WhittleObjective) -> np.ndarray:
@@ -32,21 +44,63 @@ class Fits:
         self.iterations = self.starts = 0
         self.converged = False
 
-    def run(self, theta0: np.ndarray) -> None:
+    def run(self, theta0: np.ndarray, warm: bool = False) -> None:
         """A fit from ``theta0``: the fast iterations (derivatives at the model's nodes); where
         they do not converge (nearly noise-free data: S nearly singular, and the Fisher
-        information at every grid step's centre bin a poor guide), on at every bin."""
-        res, stalled = self._minimize(theta0, True, min(_FAST_ITERATIONS, self.cfg.max_iter))
-        if np.isfinite(res.fun) and self._decrement(res.x) >= self.tol * (_STALLED_TOL if stalled else 1.0):
-            more, stalled = self._minimize(res.x, False, max(1, self.cfg.max_iter - int(res.nit)))
-            more.nit += res.nit
-            res = more if np.isfinite(more.fun) and more.fun <= res.fun else res
+        information at every grid step's centre bin a poor guide), on at every bin. ``warm``:
+        ``theta0`` is near the optimum (the previous window's): its first step is taken
+        directly (:meth:`_warm_step`) to a point evaluated at every bin, where the fit ends
+        when it has converged, and goes on at every bin when it is near (cheaper than the fast
+        mode's evaluating the point again), else as from a cold start."""
+        first = self._warm_step(theta0) if warm else None
+        if first is not None and self._decrement(first.x) < _NEAR_STEPS:
+            # evaluated at every bin: converged, or on at every bin from there
+            res, stalled = first, False
+            if self._decrement(first.x) >= self.tol:
+                more, stalled = self._minimize(first.x, False, max(1, self.cfg.max_iter - 1))
+                more.nit += first.nit
+                res = more if np.isfinite(more.fun) and more.fun <= first.fun else first
+        else:  # cold, or a warm start further off than the previous window's optimum would be
+            res, stalled = self._minimize(theta0 if first is None else first.x, True,
+                                          min(_FAST_ITERATIONS, self.cfg.max_iter))
+            converged_below = self.tol * (_STALLED_TOL if stalled else 1.0)
+            if np.isfinite(res.fun) and self._decrement(res.x) >= converged_below:
+                more, stalled = self._minimize(res.x, False, max(1, self.cfg.max_iter - int(res.nit)))
+                more.nit += res.nit
+                res = more if np.isfinite(more.fun) and more.fun <= res.fun else res
+            if first is not None:
+                res.nit += first.nit
         self.iterations += int(res.nit)
         self.starts += 1
         if np.isfinite(res.fun) and (self.best is None or res.fun < self.best.fun):
             self.best = res
             # stalled within a few tol of the optimum: as good as the quadratic model can say
             self.converged = self._decrement(res.x) < self.tol * (_STALLED_TOL if stalled else 1.0)
+
+    def _warm_step(self, theta0: np.ndarray) -> OptimizeResult | None:
+        """The first step from a warm start as scipy's trust region takes it (module
+        docstring): the fast mode's gradient and Hessian at ``theta0``, the point evaluated at
+        every bin. None where it would not be the Newton step, or is not accepted."""
+        self.objective.fast = True
+        try:
+            value, grad = self.objective.evaluate(theta0)
+            hess = self.objective.hess(theta0) if np.isfinite(value) else None
+        finally:
+            self.objective.fast = False
+        if hess is None:
+            return None
+        try:
+            step = -cho_solve(cho_factor(hess), grad)
+        except (LinAlgError, ValueError):  # not positive definite: the trust region's iterations decide
+            return None
+        predicted = -(grad @ step + 0.5 * step @ hess @ step)
+        if not (np.linalg.norm(step) <= _TRUST and predicted > 0):
+            return None
+        theta1 = theta0 + step
+        value1 = self.objective.fun(theta1)
+        if not (np.isfinite(value1) and value - value1 > _ACCEPT * predicted):
+            return None
+        return OptimizeResult(x=theta1, fun=value1, nit=1)
 
     def continued(self, objective: WhittleObjective) -> Fits:
         """These fits continued on another objective (the same θ): from the best point."""
