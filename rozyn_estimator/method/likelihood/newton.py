@@ -91,7 +91,7 @@ class Fits:
             return None
         try:
             step = -cho_solve(cho_factor(hess), grad)
-        except (LinAlgError, ValueError):  # not positive definite: the trust region's iterations decide
+        except (LinAlgError, ValueError):  # not positive definite (or finite): the trust region decides
             return None
         predicted = -(grad @ step + 0.5 * step @ hess @ step)
         if not (np.linalg.norm(step) <= _TRUST and predicted > 0):
