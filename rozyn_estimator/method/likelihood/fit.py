@@ -195,14 +195,15 @@ def _refine(
     fits = Fits(objective, cfg, cfg.tol_calibrated if calibrating else cfg.tol)
     given = start if start is not None and _physical(start, L) else None  # a usable start
     warm_theta = None
+    optimum = False  # the start is the previous window's optimum (newton.Fits: its first step)
     if isinstance(warm, Refinement) and warm.theta is not None and warm.theta.size == model.n_params:
-        warm_theta = warm.theta
+        warm_theta, optimum = warm.theta, True
     elif isinstance(warm, np.ndarray) and _physical(warm, L):
         warm_theta = _start_theta(model, spectra, warm, cfg.noise_start)
     if warm_theta is not None:
         # Warm: the previous optimum. The guard (the given start, or the grid's best) runs
         # only when the result disagrees with the start.
-        fits.run(warm_theta, warm=True)
+        fits.run(warm_theta, warm=optimum)
         first = fits.best  # None: no finite likelihood, which agrees with nothing
         if cfg.second_start and (first is None or not _agrees(model.physical(first.x), start, start_std)):
             fits.run(_start_theta(model, spectra, given, cfg.noise_start) if given is not None else
