@@ -54,23 +54,18 @@ class Fits:
         when it has converged, and goes on at every bin when it is near (cheaper than the fast
         mode's evaluating the point again), else as from a cold start."""
         first = self._warm_step(theta0) if warm else None
+        carried = 0  # the warm step's iterations, where the fast iterations go on from it
         if first is not None and self._decrement(first.x) < _NEAR_STEPS:
-            # evaluated at every bin: converged, or on at every bin from there
-            res, stalled = first, False
-            if self._decrement(first.x) >= self.tol:
-                more, stalled = self._minimize(first.x, False, max(1, self.cfg.max_iter - 1))
-                more.nit += first.nit
-                res = more if np.isfinite(more.fun) and more.fun <= first.fun else first
+            res, stalled = first, False  # evaluated at every bin: converged, or on at every bin
         else:  # cold, or a warm start further off than the previous window's optimum would be
+            carried = 0 if first is None else int(first.nit)
             res, stalled = self._minimize(theta0 if first is None else first.x, True,
                                           min(_FAST_ITERATIONS, self.cfg.max_iter))
-            converged_below = self.tol * (_STALLED_TOL if stalled else 1.0)
-            if np.isfinite(res.fun) and self._decrement(res.x) >= converged_below:
-                more, stalled = self._minimize(res.x, False, max(1, self.cfg.max_iter - int(res.nit)))
-                more.nit += res.nit
-                res = more if np.isfinite(more.fun) and more.fun <= res.fun else res
-            if first is not None:
-                res.nit += first.nit
+        if np.isfinite(res.fun) and self._decrement(res.x) >= self.tol * (_STALLED_TOL if stalled else 1.0):
+            more, stalled = self._minimize(res.x, False, max(1, self.cfg.max_iter - int(res.nit)))
+            more.nit += res.nit
+            res = more if np.isfinite(more.fun) and more.fun <= res.fun else res
+        res.nit += carried
         self.iterations += int(res.nit)
         self.starts += 1
         if np.isfinite(res.fun) and (self.best is None or res.fun < self.best.fun):
