@@ -29,8 +29,8 @@ nuisances' uncertainty included) with the score's covariance under the model, wh
 what the taper correlates (:mod:`.score`; a warm update keeps its ratio to the inverse
 Fisher information while the window's length stays and its body parameters move by less
 than 1 %), mapped to the physical parameters, and raised where the road is not stationary
-(:mod:`.blocks`: half way to the score's time blocks' variance, or by the road's
-intermittency, the larger). What
+(:mod:`.intermittency`: by the road's intermittency, where the road's own part
+carries the information). What
 the vehicle's tolerances add comes from :mod:`.refine_budget` (a warm update keeps the previous window's
 while its body parameters moved by less than 1 % (1 cm for the lateral CoG): the
 contributions are sensitivities of the model at θ).
@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import OptimizeResult, minimize
 
-from rozyn_estimator.method.full.blocks import variance_factors
+from rozyn_estimator.method.full.intermittency import variance_factors
 from rozyn_estimator.method.full.refine_budget import refinement_contributions
 from rozyn_estimator.method.full.score import sandwich_ratio
 from rozyn_estimator.method.full.spectrum import BODY_NAMES, FullCarSpectrum, expected_periodogram_m2
@@ -230,7 +230,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     cov = sandwich.ratio * np.outer(scale, scale)
     if not (np.all(np.isfinite(cov)) and np.all(np.diag(cov) > 0)):
         raise _FitError("likelihood fit: covariance not positive")
-    factors = variance_factors(objective, theta, combos, cov, spectra, y, share, cfg)
+    factors = variance_factors(objective, theta, combos, spectra, share, cfg.taper)
     cov = np.sqrt(factors)[:, None] * cov * np.sqrt(factors)[None, :]
     contributions, budget_theta = _contributions(objective, theta, theta_cov, vehicle, warm)
     converged = objective.decrement(theta) < cfg.tol

@@ -48,10 +48,11 @@ class LikelihoodConfig:
                                   low=0.0, open_low=True)
     noise_start: float = param(1e-3, "the starts' noise floors, share of each channel's band power",
                                low=0.0, open_low=True, high=1.0)
-    block_s: float = param(12.0, "time blocks of the covariance's empirical score variance", unit="s",
+    block_s: float = param(12.0, "time blocks of the half car's empirical score variance", unit="s",
                            low=0.0, open_low=True)
-    block_weight: float = param(0.5, "the time blocks' share in the score variance, 0..1 (0: the model's "
-                                "alone)", low=0.0, high=1.0)
+    block_weight: float = param(0.5, "the time blocks' share in the half car's score variance, 0..1 (0: "
+                                "the model's alone; the full car's takes the road's intermittency instead)",
+                                low=0.0, high=1.0)
 
     def __post_init__(self) -> None:
         check(self, (
