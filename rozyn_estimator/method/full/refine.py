@@ -160,7 +160,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     model = FullCarSpectrum(vehicle, sensors, freq, fs, v if v.size > 1 else float(v[0]),
                             cfg.aliases, f_ref_hz=math.sqrt(band[0] * band[1]),
                             road_shape_terms=cfg.road_shape_terms, min_noise_psd=_MIN_NOISE * power,
-                            kernel_m2_hz2=kernel,
+                            kernel_m2_hz2=kernel, road_max_cpm=cfg.road_max_cpm,
                             grid_hz=0.0 if _noise_free(warm, power) else cfg.grid_hz)
     objective = FullWhittle(model, periodogram, counts)
     best: OptimizeResult | None = None

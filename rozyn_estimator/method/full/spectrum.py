@@ -19,7 +19,8 @@ and the spectral matrix of the sampled signals is
     S(f) = σ² Σ_a r(f_a) G(ω_a) R(ω_a) G(ω_a)ᴴ + diag(n),
 
 with the half car's road shape ``r`` (ISO 8608's power law ``|f/f_ref|^(2-w)`` times smooth
-Legendre departures), its aliasing sum, a white noise floor per sensor, and the wheels' road
+Legendre departures), its aliasing sum (of the road below its profile's end only:
+:func:`spatial_band`), a white noise floor per sensor, and the wheels' road
 velocity covariance ``R = [[Γ, Γ φ̄], [Γ φ, Γ]]`` (front wheels, then rear, each left and
 right): ``φ`` the rear wheels' delay behind the front ones (:func:`delay_characteristic`; the
 rear wheels run in the front ones' tracks), ``Γ = [[1, γ], [γ, 1]]`` the two tracks'
@@ -42,7 +43,7 @@ from scipy import sparse, special
 
 from rozyn_estimator.method.full.fit import corner_matrices, corner_matrix_derivatives
 from rozyn_estimator.method.full.grid import ALIAS_SPACING_HZ, alias_map, apply, evaluation_map
-from rozyn_estimator.method.likelihood.road_input import delay_characteristic
+from rozyn_estimator.method.likelihood.road_input import delay_characteristic, spatial_band
 from rozyn_estimator.vehicle_full import FullVehicle
 
 _CORNER_FIELDS = ("wheelbase_m", "track_front_m", "track_rear_m", "unsprung_mass_kg", "tyre_stiffness_npm",
@@ -80,20 +81,23 @@ class FullCarSpectrum:
             spread of bins; :func:`expected_periodogram_m2`); 0: the model is S itself.
         grid_hz: S is evaluated this far apart and interpolated (:mod:`.grid`); 0: at each
             frequency.
+        road_max_cpm: the road's profile ends at this spatial frequency [cycles/m]: the
+            aliases hold the road below it only (:func:`spatial_band`); 0: no end.
     """
 
     def __init__(self, vehicle: FullVehicle, sensors: Sequence[int], freq_hz: np.ndarray, fs_hz: float,
                  speed_mps: float | np.ndarray, aliases: int = 1, f_ref_hz: float = 3.0,
                  road_shape_terms: int = 2, min_noise_psd: np.ndarray | None = None,
                  shape_edges_hz: tuple[float, float] | None = None,
-                 kernel_m2_hz2: np.ndarray | float = 0.0, grid_hz: float = 0.0) -> None:
+                 kernel_m2_hz2: np.ndarray | float = 0.0, grid_hz: float = 0.0,
+                 road_max_cpm: float = 0.0) -> None:
         self.freq_hz = freq_hz
         edges_hz = shape_edges_hz or (float(freq_hz.min()), float(freq_hz.max()))
         m2 = np.broadcast_to(np.asarray(kernel_m2_hz2, dtype=float), freq_hz.shape)
         self._settings: dict[str, Any] = dict(  # what regrid() rebuilds the model from
             vehicle=vehicle, sensors=sensors, fs_hz=fs_hz, speed_mps=speed_mps, aliases=aliases,
             f_ref_hz=f_ref_hz, road_shape_terms=road_shape_terms, min_noise_psd=min_noise_psd,
-            shape_edges_hz=edges_hz, kernel_m2_hz2=m2, grid_hz=grid_hz)
+            shape_edges_hz=edges_hz, kernel_m2_hz2=m2, grid_hz=grid_hz, road_max_cpm=road_max_cpm)
         self.sensors = tuple(sensors)
         self.k = len(self.sensors)
         nodes, self._op = evaluation_map(freq_hz, m2, grid_hz)  # where S is evaluated, the map from there
@@ -106,6 +110,7 @@ class FullCarSpectrum:
         f = np.r_[nodes, (alias_nodes[None, :] + shifts[:, None]).ravel()]  # the band's nodes, then aliases'
         self.omega = 2.0 * np.pi * f
         self.speed_mps = speed_mps
+        self.alias_road = np.r_[np.ones(nodes.size), spatial_band(f[nodes.size:], speed_mps, road_max_cpm)]
         self.log_shape = np.log(np.abs(f) / f_ref_hz)
         edges = np.log(np.array(edges_hz) / f_ref_hz)
         x = (2.0 * self.log_shape - edges.sum()) / (edges[1] - edges[0])
@@ -300,7 +305,8 @@ class FullCarSpectrum:
         H = inv_d @ self.body_input
         gamma, d_gamma = track_coherence(self.x_coherence * math.exp(theta[self.index["ln_coherence_scale"]]))
         shape = theta[self.shape_slice] @ self.shape_basis if self.shape_basis.size else 0.0
-        weight = np.exp(theta[5] + (2.0 - theta[6]) * self.log_shape + shape)[:, None, None]
+        weight = self.alias_road * np.exp(theta[5] + (2.0 - theta[6]) * self.log_shape + shape)
+        weight = weight[:, None, None]
         inputs = weight * self._inputs(gamma)
         motion = H @ inputs @ _h(H)
         d_motion = H @ (weight * self._inputs(d_gamma, diagonal=0.0)) @ _h(H)

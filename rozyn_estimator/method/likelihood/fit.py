@@ -187,7 +187,8 @@ def _refine(
                             road_shape_terms=cfg.road_shape_terms,
                             estimate_incoherence=cfg.estimate_incoherence,
                             window_weights=spectra.window_weights,
-                            grid_step=1 if _noise_free(warm, spectra) else _bins(cfg.grid_hz, spectra))
+                            grid_step=1 if _noise_free(warm, spectra) else _bins(cfg.grid_hz, spectra),
+                            road_max_cpm=cfg.road_max_cpm)
     objective = WhittleObjective(model, spectra, cfg.spectra)
     # A calibration's Newton step of the augmented posterior follows when there are values
     # to calibrate: it also completes the fit's last bit of convergence.

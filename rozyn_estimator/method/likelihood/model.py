@@ -28,7 +28,8 @@ and the (two-sided) spectral matrix of the sampled signals is
 one at constant speed), ``r = |f / f_ref|^(2-w) exp(Σ c_d P_d(x))`` the road's shape (ISO
 8608's power law times smooth departures, ``P_d`` Legendre polynomials of degree ≥ 2 in
 log frequency ``x`` across the band), the sum over ``a = -A..A`` the aliasing of
-instantaneous sampling, and ``n_f, n_r`` white sensor noise. Optionally a share ``ε`` of
+instantaneous sampling (of the road below its profile's end only: :func:`spatial_band`),
+and ``n_f, n_r`` white sensor noise. Optionally a share ``ε`` of
 the road part's diagonal is added as incoherent between the channels (a model-error
 floor; useful only on nearly noise-free data, where nothing else limits the coherence).
 """
@@ -50,7 +51,7 @@ from rozyn_estimator.method.likelihood.grid import (
     map_bins,
     reduction,
 )
-from rozyn_estimator.method.likelihood.road_input import delay_characteristic
+from rozyn_estimator.method.likelihood.road_input import delay_characteristic, spatial_band
 from rozyn_estimator.vehicle import Vehicle
 
 # Corner values θ can hold as log scale factors (``ln_<term>_<corner>``), in θ's order:
@@ -83,6 +84,8 @@ class HalfCarSpectrum:
             keeps S positive definite when the data are noise-free.
         grid_step: the model is evaluated every ``grid_step`` bins and interpolated
             (:mod:`.grid`; the taper's smoothing is applied there too).
+        road_max_cpm: the road's profile ends at this spatial frequency [cycles/m]: the
+            aliases hold the road below it only (:func:`.road_input.spatial_band`); 0: no end.
     """
 
     def __init__(
@@ -93,6 +96,7 @@ class HalfCarSpectrum:
         window_weights: np.ndarray | None = None, calibrate_gain: bool = False,
         calibrate_time_offset: bool = False, shape_edges_hz: tuple[float, float] | None = None,
         corner_terms: tuple[str, ...] = (), sensor_positions: bool = False, grid_step: int = 1,
+        road_max_cpm: float = 0.0,
     ) -> None:
         self.freq_hz, self.fs_hz, self.aliases, self.f_ref_hz = freq_hz, fs_hz, aliases, f_ref_hz
         self._settings: dict[str, Any] = dict(  # what variant() rebuilds the model from
@@ -102,7 +106,7 @@ class HalfCarSpectrum:
             estimate_incoherence=estimate_incoherence, window_weights=window_weights,
             calibrate_gain=calibrate_gain, calibrate_time_offset=calibrate_time_offset,
             shape_edges_hz=shape_edges_hz, corner_terms=corner_terms, sensor_positions=sensor_positions,
-            grid_step=grid_step,
+            grid_step=grid_step, road_max_cpm=road_max_cpm,
         )
         # the grid the model is evaluated on (cached: consecutive windows and the model's variants share it)
         at = evaluation_grid(freq_hz, fs_hz, aliases, f_ref_hz, window_weights, grid_step, road_shape_terms,
@@ -110,6 +114,9 @@ class HalfCarSpectrum:
         self.kernel, self.half, self.n_eval = at.kernel, at.half, at.n_eval
         self.n_ext, self.n_freq, self.n_alias = freq_hz.size + 2 * self.half, freq_hz.size, 2 * aliases + 1
         self.omega, self.log_shape, self.shape_basis = at.omega, at.log_shape, at.shape_basis
+        aliased = np.repeat(np.arange(-aliases, aliases + 1) != 0, self.n_eval)
+        band = spatial_band(self.omega / (2.0 * np.pi), speed_mps, road_max_cpm)
+        self.alias_road = np.where(aliased, band, 1.0)  # the band keeps its road (S stays smooth)
         self.grid_step = grid_step
         self._reduction: Reduction | None = None  # the sparse map to the bins: built when first used
         self.speed_mps = speed_mps
@@ -285,7 +292,7 @@ class HalfCarSpectrum:
         iw = 1j * w
         Q = iw * np.einsum("ab,bcf->acf", P, H)  # iω P H
         exponent = ((2.0 - theta[self.index["waviness"]]) if self.estimate_waviness else 0.0) * self.log_shape
-        weight = np.exp(theta[3] + exponent + theta[self.shape_slice] @ self.shape_basis)
+        weight = self.alias_road * np.exp(theta[3] + exponent + theta[self.shape_slice] @ self.shape_basis)
         u = [T.T * c for c in self.inputs]  # T ⊙ C_c, each (2, F)
         x = [np.einsum("abf,bf->af", H, uc) for uc in u]
         g = [iw * (P @ xc) for xc in x]
