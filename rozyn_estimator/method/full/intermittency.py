@@ -41,9 +41,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import fft as sfft
 
-from rozyn_estimator.method.full.grid import apply
+from rozyn_estimator.method.full.score import spectrum_itself
 from rozyn_estimator.method.full.whittle import FullWhittle
-from rozyn_estimator.method.likelihood.grid import lagrange_matrix
 from rozyn_estimator.method.likelihood.spectra import Spectra
 
 
@@ -83,12 +82,7 @@ def road_itself(objective: FullWhittle, theta: np.ndarray) -> np.ndarray:
     some road power where the road itself has none (module docstring: why that part is no
     envelope's). The noise floors are white: S less its diagonal floors."""
     model = objective.model
-    if model.grid_hz > 0:  # interpolated from the model's nodes as the fit's S is
-        first_node_hz = model.omega[0] / (2.0 * np.pi)
-        S = apply(lagrange_matrix((model.freq_hz - first_node_hz) / model.grid_hz, model.n_freq),
-                  objective.node_spectrum(theta))
-    else:
-        S = model.regrid(model.freq_hz, 0.0, 0.0).spectrum(theta, derivatives=False)[0]
+    S = spectrum_itself(objective, theta, model.freq_hz)
     return S - np.eye(model.k) * (np.exp(theta[model.noise_slice]) + model.min_noise_psd)
 
 

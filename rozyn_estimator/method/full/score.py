@@ -38,14 +38,21 @@ def fine_spectrum(objective: FullWhittle, theta: np.ndarray, spectra: Spectra, r
     in the band and ``reach`` bins beyond each of its edges: interpolated from the model's
     nodes as the fit's S is (:mod:`.grid`; the few bins beyond the nodes, a tenth of a hertz
     at most, by the end nodes' polynomials)."""
-    model = objective.model
     df = spectra.fs_hz / spectra.n_samples
     freq = spectra.freq_hz[0] + df * np.arange(-reach, spectra.freq_hz.size + reach)
-    if model.grid_hz <= 0:  # S at each target (nearly noise-free data): evaluated at the bins
-        return model.regrid(freq, 0.0, 0.0).spectrum(theta, derivatives=False)[0]
-    S_nodes = objective.node_spectrum(theta)
+    return spectrum_itself(objective, theta, freq)
+
+
+def spectrum_itself(objective: FullWhittle, theta: np.ndarray, freq_hz: np.ndarray) -> np.ndarray:
+    """S (F, k, k) itself, not the periodogram's expectation (no taper's or groups' smoothing),
+    at ``freq_hz``: interpolated from the model's nodes as the fit's S is, or evaluated there
+    when the model has no grid (nearly noise-free data)."""
+    model = objective.model
+    if model.grid_hz <= 0:
+        return model.regrid(freq_hz, 0.0, 0.0).spectrum(theta, derivatives=False)[0]
     first_node_hz = model.omega[0] / (2.0 * np.pi)
-    return apply(lagrange_matrix((freq - first_node_hz) / model.grid_hz, model.n_freq), S_nodes)
+    return apply(lagrange_matrix((freq_hz - first_node_hz) / model.grid_hz, model.n_freq),
+                 objective.node_spectrum(theta))
 
 
 def score_covariance(objective: FullWhittle, theta: np.ndarray, combos: np.ndarray,
