@@ -24,6 +24,11 @@ the best point of a coarse grid of heave, pitch and roll frequencies as well. Th
 wins (continued if it has not converged); a result that still explains a channel as
 mostly noise is refused.
 
+Sensors: where the vehicle's tolerances allow and ``self_calibrate`` is on, each sensor's
+gain and position and the rear sensors' delay are then calibrated (:mod:`.calibrate`: the
+augmented posterior's step; a warm update takes the previous window's over) and the model
+assumes them from there on; a cold fit stops at ``tol_calibrated``, the step completes it.
+
 Covariance: the sandwich ``F⁻¹ Cov(∇ℓ) F⁻¹`` of the inverse Fisher information (the
 nuisances' uncertainty included) with the score's covariance under the model, which holds
 what the taper correlates (:mod:`.score`; a warm update keeps its ratio to the inverse
@@ -47,6 +52,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import OptimizeResult, minimize
 
+from rozyn_estimator.method.full.calibrate import SensorCalibration, calibrate_sensors, sensor_groups
 from rozyn_estimator.method.full.intermittency import variance_factors
 from rozyn_estimator.method.full.refine_budget import refinement_contributions
 from rozyn_estimator.method.full.score import sandwich_ratio
@@ -89,6 +95,7 @@ class FullRefinement:
     budget_theta: np.ndarray | None = None  # the body parameters θ[:5] the contributions were taken at
     variance_factors: tuple[float, ...] = ()  # the non-stationary road's factors on the model's variances
     sandwich: SandwichRatio | None = None  # the taper's sandwich over the model's std (.score), where taken
+    calibration: SensorCalibration | None = None  # the sensors as the data calibrated them (.calibrate)
     elapsed_ms: float = 0.0
     notes: tuple[str, ...] = ()
 
@@ -104,6 +111,8 @@ class FullRefinement:
                 "noise_std_mps2": list(self.noise_std_mps2),
                 "waviness": self.waviness, "coherence_scale": self.coherence_scale,
                 "variance_factors": list(self.variance_factors),
+                "calibration": [] if self.calibration is None else
+                [c.to_dict() for c in self.calibration.calibrations],
                 "elapsed_ms": self.elapsed_ms, "notes": list(self.notes)}
 
 
@@ -157,20 +166,26 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     freq, periodogram, counts = _grouped(spectra.freq_hz, spectra.periodogram,
                                          max(1, int(_GROUP_HZ * y.shape[0] / fs + 1e-9)))
     kernel = _kernel_m2(y.shape[0], fs, cfg.taper, counts)
+    groups = sensor_groups(vehicle, sensors) if cfg.self_calibrate else ()
+    assumed = warm.calibration if warm is not None and warm.calibration is not None \
+        and warm.calibration.groups == groups else None  # the previous window's sensors
     model = FullCarSpectrum(vehicle, sensors, freq, fs, v if v.size > 1 else float(v[0]),
                             cfg.aliases, f_ref_hz=math.sqrt(band[0] * band[1]),
                             road_shape_terms=cfg.road_shape_terms, min_noise_psd=_MIN_NOISE * power,
                             kernel_m2_hz2=kernel, road_max_cpm=cfg.road_max_cpm,
+                            sensor_values=None if assumed is None else assumed.values,
                             grid_hz=0.0 if _noise_free(warm, power) else cfg.grid_hz)
     objective = FullWhittle(model, periodogram, counts)
     best: OptimizeResult | None = None
     iterations = starts = 0
 
     ahead = _coarse_fit(spectra, y.shape[0], model, cfg)
+    # a calibration's step completes the fit (as the half car's: the estimates move by < 0.01 std)
+    fit_cfg = dataclasses.replace(cfg, tol=cfg.tol_calibrated) if groups and assumed is None else cfg
 
     def run(theta0: np.ndarray, max_iter: int, cold: bool = False) -> None:
         nonlocal best, iterations, starts
-        res = _minimize(objective, ahead(theta0) if cold else theta0, cfg, max_iter)
+        res = _minimize(objective, ahead(theta0) if cold else theta0, fit_cfg, max_iter)
         iterations, starts = iterations + int(res.nit), starts + 1
         if np.isfinite(res.fun) and (best is None or res.fun < best.fun):
             best = res
@@ -182,7 +197,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         if best is None:
             return True
         moved = np.abs(model.physical(best.x)[:3] / first_params[:3] - 1.0).max() > _CLOSE
-        return bool(moved or objective.decrement(best.x) >= cfg.tol
+        return bool(moved or objective.decrement(best.x) >= fit_cfg.tol
                     or _noise_share(best.x, model, power).max() > cfg.max_noise_share)
 
     first_iter = min(_FIRST_ITERATIONS, cfg.max_iter) if cfg.second_start else cfg.max_iter
@@ -201,11 +216,23 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         model = model.regrid(freq, kernel, 0.0)
         objective = FullWhittle(model, periodogram, counts)
         run(found, max(1, cfg.max_iter - iterations))
-    if best is not None and objective.decrement(best.x) >= cfg.tol and iterations < cfg.max_iter:
+    if best is not None and objective.decrement(best.x) >= fit_cfg.tol and iterations < cfg.max_iter:
         run(best.x, cfg.max_iter - iterations)  # the better start's fit, continued
     if best is None or not np.isfinite(best.fun):
         raise _FitError("likelihood fit: no start gave a finite likelihood")
-    theta = best.x
+    theta, calibration, notes = best.x, None, []
+    if assumed is not None and assumed.holds(theta):  # the model assumes its values already
+        calibration = assumed.aged()
+    elif groups:
+        try:
+            theta, calibration = calibrate_sensors(objective, theta, vehicle, groups,
+                                                   None if assumed is None else assumed.values, cfg.max_iter)
+        except (ValueError, np.linalg.LinAlgError) as exc:  # the first-order budget stands for them
+            notes.append(f"sensor calibration failed ({exc}): the tolerances' first-order budget stands")
+        else:
+            model.assume_sensors(calibration.values)
+            objective = FullWhittle(model, periodogram, counts)
+    notes += [] if calibration is None else calibration.departures()
     share = _noise_share(theta, model, power)
     worst = int(np.argmax(share))
     if share[worst] > cfg.max_noise_share:
@@ -232,9 +259,11 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         raise _FitError("likelihood fit: covariance not positive")
     factors = variance_factors(objective, theta, combos, spectra, share, cfg.taper)
     cov = np.sqrt(factors)[:, None] * cov * np.sqrt(factors)[None, :]
-    contributions, budget_theta = _contributions(objective, theta, theta_cov, vehicle, warm)
-    converged = objective.decrement(theta) < cfg.tol
-    notes = () if converged else (f"likelihood fit: not converged in {cfg.max_iter} iterations",)
+    contributions, budget_theta = _contributions(objective, theta, theta_cov, vehicle, warm, calibration)
+    # the calibration's step completes the fit's convergence (the half car's tol_calibrated)
+    if objective.decrement(theta) >= (cfg.tol if calibration is None else cfg.tol_calibrated) or \
+            (calibration is not None and not calibration.converged):
+        notes.append(f"likelihood fit: not converged in {cfg.max_iter} iterations")
     k = model.index
     return FullRefinement(
         status="ok", params=params, covariance=0.5 * (cov + cov.T), theta=theta, names=tuple(model.names),
@@ -242,20 +271,25 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         noise_std_mps2=tuple(np.sqrt(np.exp(theta[model.noise_slice]) * fs).tolist()),
         waviness=float(theta[k["waviness"]]), coherence_scale=float(np.exp(theta[k["ln_coherence_scale"]])),
         contributions=contributions, budget_theta=budget_theta, variance_factors=tuple(factors.tolist()),
-        sandwich=sandwich, notes=notes)
+        sandwich=sandwich, calibration=calibration, notes=tuple(notes))
 
 
 def _contributions(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndarray, vehicle: FullVehicle,
-                   warm: FullRefinement | None) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
-    """The tolerances' contributions and the θ they were taken at: the previous window's when
-    its body parameters were within ``_BUDGET_MOVE`` of these (the contributions are the
+                   warm: FullRefinement | None,
+                   calibration: SensorCalibration | None) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
+    """The tolerances' contributions and the θ they were taken at: the calibrated sensors'
+    (:mod:`.calibrate`) and the first-order budget's of the other values, the previous window's
+    when its body parameters were within ``_BUDGET_MOVE`` of these (the contributions are the
     model's sensitivities at θ, not the data's: they change by about as much as θ does)."""
     if not vehicle.tolerances.any:
         return {}, None
+    skip = set() if calibration is None else calibration.tolerance_keys
+    fresh = {} if calibration is None else calibration.contributions
     if warm is not None and warm.budget_theta is not None and warm.contributions and \
             np.max(np.abs(theta[:5] - warm.budget_theta)) < _BUDGET_MOVE:
-        return warm.contributions, warm.budget_theta
-    return refinement_contributions(objective, theta, theta_cov, vehicle), theta[:5].copy()
+        kept = {name: c for name, c in warm.contributions.items() if name.split("[")[0] not in skip}
+        return kept | fresh, warm.budget_theta
+    return refinement_contributions(objective, theta, theta_cov, vehicle, skip) | fresh, theta[:5].copy()
 
 
 def _grouped(freq_hz: np.ndarray, periodogram: np.ndarray, step: int) -> tuple[np.ndarray, ...]:

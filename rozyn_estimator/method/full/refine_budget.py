@@ -41,14 +41,15 @@ Move = Callable[[float], tuple[FullVehicle, np.ndarray | None]]
 
 
 def refinement_contributions(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndarray,
-                             vehicle: FullVehicle) -> dict[str, np.ndarray]:
-    """Contributions ``c_j`` (5,) of each toleranced value of ``vehicle`` to the refined estimate."""
+                             vehicle: FullVehicle, skip: set[str] | None = None) -> dict[str, np.ndarray]:
+    """Contributions ``c_j`` (5,) of each toleranced value of ``vehicle`` to the refined estimate
+    (but those of the tolerance keys in ``skip``: the calibrated sensors')."""
     model = objective.model
     _, _, linv = objective.at(theta)
     S = objective.node_spectrum(theta)
     jac = model.physical_jacobian(theta)
-    moves = [(name, step, move(step), tol) for key, tol in vehicle.tolerances.to_dict().items() if tol > 0
-             for name, step, move in _moves(vehicle, model, key)]
+    moves = [(name, step, move(step), tol) for key, tol in vehicle.tolerances.to_dict().items()
+             if tol > 0 and key not in (skip or set()) for name, step, move in _moves(vehicle, model, key)]
     order = [name for name, *_ in moves]
     changes: dict[str, np.ndarray] = {}  # name -> dS along the move, per unit step
     corner_moves = [(m[0], d) for m in moves if (d := _corner_direction(vehicle, *m[2], m[1])) is not None]

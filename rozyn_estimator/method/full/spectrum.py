@@ -33,6 +33,7 @@ coherence is not exactly the isotropic surface's: its one nuisance).
 from __future__ import annotations
 
 import contextlib
+import copy
 import math
 from collections.abc import Iterator, Sequence
 from typing import Any
@@ -41,6 +42,7 @@ import numpy as np
 from numpy.polynomial import legendre
 from scipy import sparse, special
 
+from rozyn_estimator.method.full import sensing as sensor_model
 from rozyn_estimator.method.full.fit import corner_matrices, corner_matrix_derivatives
 from rozyn_estimator.method.full.grid import ALIAS_SPACING_HZ, alias_map, apply, evaluation_map
 from rozyn_estimator.method.likelihood.road_input import delay_characteristic, spatial_band
@@ -83,6 +85,10 @@ class FullCarSpectrum:
             frequency.
         road_max_cpm: the road's profile ends at this spatial frequency [cycles/m]: the
             aliases hold the road below it only (:func:`spatial_band`); 0: no end.
+        calibrate: the sensors' values θ also holds (:data:`.sensing.GROUPS`: ``gain``, ``x``,
+            ``y``, ``delay``; after the noise floors, as :func:`.sensing.parameter_names`).
+        sensor_values: the sensors' departures from the vehicle's the model assumes (all of
+            :func:`.sensing.parameter_names`' values for every group; None: none).
     """
 
     def __init__(self, vehicle: FullVehicle, sensors: Sequence[int], freq_hz: np.ndarray, fs_hz: float,
@@ -90,16 +96,22 @@ class FullCarSpectrum:
                  road_shape_terms: int = 2, min_noise_psd: np.ndarray | None = None,
                  shape_edges_hz: tuple[float, float] | None = None,
                  kernel_m2_hz2: np.ndarray | float = 0.0, grid_hz: float = 0.0,
-                 road_max_cpm: float = 0.0) -> None:
+                 road_max_cpm: float = 0.0, calibrate: Sequence[str] = (),
+                 sensor_values: np.ndarray | None = None) -> None:
         self.freq_hz = freq_hz
         edges_hz = shape_edges_hz or (float(freq_hz.min()), float(freq_hz.max()))
         m2 = np.broadcast_to(np.asarray(kernel_m2_hz2, dtype=float), freq_hz.shape)
         self._settings: dict[str, Any] = dict(  # what regrid() rebuilds the model from
             vehicle=vehicle, sensors=sensors, fs_hz=fs_hz, speed_mps=speed_mps, aliases=aliases,
             f_ref_hz=f_ref_hz, road_shape_terms=road_shape_terms, min_noise_psd=min_noise_psd,
-            shape_edges_hz=edges_hz, kernel_m2_hz2=m2, grid_hz=grid_hz, road_max_cpm=road_max_cpm)
+            shape_edges_hz=edges_hz, kernel_m2_hz2=m2, grid_hz=grid_hz, road_max_cpm=road_max_cpm,
+            calibrate=tuple(calibrate), sensor_values=sensor_values)
         self.sensors = tuple(sensors)
         self.k = len(self.sensors)
+        self.rear = np.array([c in (2, 3) for c in self.sensors], dtype=float)
+        self.calibrate = tuple(g for g in sensor_model.GROUPS if g in calibrate)
+        self.sensor_values = None if sensor_values is None else \
+            sensor_model.unpack(np.asarray(sensor_values, dtype=float), sensor_model.GROUPS, self.k)
         nodes, self._op = evaluation_map(freq_hz, m2, grid_hz)  # where S is evaluated, the map from there
         self._op_t = None if self._op is None else sparse.csr_array(self._op.T)
         self._row_ops: dict[bytes, sparse.csr_array] = {}  # the map's rows at some frequencies
@@ -121,9 +133,11 @@ class FullCarSpectrum:
         self.names = [*BODY_NAMES, "ln_road", "waviness", *[f"road_shape_{d}" for d in
                                                            range(2, road_shape_terms + 2)],
                       "ln_coherence_scale", *[f"ln_noise_{i}" for i in range(self.k)]]
+        self.noise_slice = slice(len(self.names) - self.k, len(self.names))
+        self.names += sensor_model.parameter_names(self.calibrate, self.k)
+        self.calibration_slice = slice(self.noise_slice.stop, len(self.names))
         self.index = {name: i for i, name in enumerate(self.names)}
         self.n_params = len(self.names)
-        self.noise_slice = slice(self.n_params - self.k, self.n_params)
         self.shape_slice = slice(7, 7 + road_shape_terms)
         self.wheelbase_m = vehicle.wheelbase_m  # l_f's scale in θ: kept when the budget moves the vehicle
         self._body_key: bytes | None = None  # _body_motion's cache
@@ -136,6 +150,29 @@ class FullCarSpectrum:
         m2 = np.broadcast_to(np.asarray(kernel_m2_hz2, dtype=float), freq_hz.shape)
         changes = {"vehicle": self.vehicle, "kernel_m2_hz2": m2, "grid_hz": grid_hz}
         return FullCarSpectrum(freq_hz=freq_hz, **(self._settings | changes))
+
+    def calibrating(self, groups: Sequence[str]) -> FullCarSpectrum:
+        """This model with θ also holding the sensors' ``groups`` (their departures from the
+        vehicle's; the assumed ones dropped), as the constructor's ``calibrate``: a copy that
+        shares the rest (the body's motion cached among it), not a new model (a few ms)."""
+        out = copy.copy(self)
+        out.calibrate = tuple(g for g in sensor_model.GROUPS if g in groups)
+        out._settings = self._settings | {"calibrate": out.calibrate, "sensor_values": None}
+        out.names = self.names[: self.noise_slice.stop] + sensor_model.parameter_names(out.calibrate, self.k)
+        out.calibration_slice = slice(self.noise_slice.stop, len(out.names))
+        out.index = {name: i for i, name in enumerate(out.names)}
+        out.n_params = len(out.names)
+        out.sensor_values = None
+        out.sensing = out.sensing_of(out.vehicle)
+        return out
+
+    def assume_sensors(self, sensor_values: np.ndarray) -> None:
+        """From now on the model assumes the sensors' departures ``sensor_values`` (as the
+        constructor's; the body's motion stays cached: it does not depend on them)."""
+        self._settings["sensor_values"] = sensor_values
+        self.sensor_values = sensor_model.unpack(np.asarray(sensor_values, dtype=float), sensor_model.GROUPS,
+                                                 self.k)
+        self.sensing = self.sensing_of(self.vehicle)
 
     def set_vehicle(self, vehicle: FullVehicle, channel_factor: np.ndarray | None = None) -> None:
         """(Re)compute what depends on the assumed vehicle and sensors; ``channel_factor``
@@ -177,7 +214,17 @@ class FullCarSpectrum:
         P = np.column_stack([np.ones(self.k), -xs, ys])
         factor = np.ones((w.size, self.k)) if channel_factor is None else \
             np.broadcast_to(channel_factor, (w.size, self.k))
-        return 1j * w[:, None, None] * factor[:, :, None] * P[None]
+        out = 1j * w[:, None, None] * factor[:, :, None] * P[None]
+        if self.sensor_values is None:
+            return out
+        return sensor_model.calibrated(out, w, self.rear, self.sensor_values)
+
+    def _sensing_at(self, theta: np.ndarray) -> np.ndarray:
+        """The sensing with θ's calibrated values (the assumed one when θ holds none)."""
+        if not self.calibrate:
+            return self.sensing
+        values = sensor_model.unpack(theta[self.calibration_slice], self.calibrate, self.k)
+        return sensor_model.calibrated(self.sensing, self.omega, self.rear, values)
 
     # --- parameters -------------------------------------------------------------------
     def theta(self, params: np.ndarray, road: float, noise: np.ndarray) -> np.ndarray:
@@ -249,7 +296,7 @@ class FullCarSpectrum:
         return S, dS
 
     def _spectrum(self, theta: np.ndarray, derivatives: bool) -> tuple[np.ndarray, np.ndarray | None]:
-        sensing = self.sensing
+        sensing = self._sensing_at(theta)
         inv_d, _, _, motion, d_motion = self._body_motion(theta)
         per_alias = sensing @ motion @ _h(sensing)  # (F, k, k)
         S_road = self._fold(per_alias)
@@ -271,7 +318,18 @@ class FullCarSpectrum:
         dS[self.index["ln_coherence_scale"]] = self._fold(sensing @ d_motion @ _h(sensing))
         for i in range(self.k):
             dS[self.noise_slice.start + i, :, i, i] = noise[i]
+        if self.calibrate:
+            dS[self.calibration_slice] = self.calibration_derivatives(theta)
         return S, dS
+
+    def calibration_derivatives(self, theta: np.ndarray) -> np.ndarray:
+        """dS (G, nodes, k, k) at θ by the sensors' calibrated values (``calibrate``): S is
+        ``P_s (H R Hᴴ) P_sᴴ`` and the body's motion stays."""
+        values = sensor_model.unpack(theta[self.calibration_slice], self.calibrate, self.k)
+        d_sensing = sensor_model.derivatives(self.sensing, self.omega, self.rear, values, self.calibrate)
+        _, _, _, motion, _ = self._body_motion(theta)
+        part = d_sensing @ (motion @ _h(self._sensing_at(theta)))
+        return self._fold(part + _h(part))
 
     def corner_derivatives(self, theta: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """dS (G, nodes, k, k) at θ along ``directions`` (G, 22) of the corners' values

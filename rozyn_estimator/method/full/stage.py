@@ -157,7 +157,8 @@ def _refined(
     ref = refine_full(y, fs_hz, vehicle, index, quick.params, 0.0 if speed_mps is None else speed_mps,
                       cfg.likelihood, warm=warm.refinement if warm is not None else None)
     if ref.ok and ref.params is not None and ref.covariance is not None:
-        budget = FullBudget(ref.covariance, ref.contributions) if vehicle.tolerances.any else None
+        calibrated = () if ref.calibration is None else ref.calibration.calibrations
+        budget = FullBudget(ref.covariance, ref.contributions, calibrated) if vehicle.tolerances.any else None
         return FullEstimate(status="ok", params=ref.params,
                             covariance=ref.covariance if budget is None else budget.total, modes=quick.modes,
                             sensors=tuple(sensors), n_samples=quick.n_samples, notes=ref.notes + quick.notes,

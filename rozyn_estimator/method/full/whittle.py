@@ -38,11 +38,14 @@ class FullWhittle:
             their means over groups of neighbouring bins.
         counts: (K,) the bins each mean stands for (default: one each): a mean of ``c``
             bins counts ``c`` times (its Wishart likelihood has ``c`` degrees of freedom).
+        precision: (n_params,) Gaussian priors' precisions ``1/σ²`` on θ about zero (0: none):
+            ℓ, ∇ℓ and the optimiser's Hessian are the posterior's; :meth:`fisher` stays the data's.
     """
 
     def __init__(self, model: FullCarSpectrum, periodogram: np.ndarray,
-                 counts: np.ndarray | None = None) -> None:
+                 counts: np.ndarray | None = None, precision: np.ndarray | None = None) -> None:
         self.model, self.periodogram = model, periodogram
+        self.precision = np.zeros(model.n_params) if precision is None else np.asarray(precision, dtype=float)
         self.counts = np.ones(periodogram.shape[0]) if counts is None else np.asarray(counts, dtype=float)
         self._root_counts = np.sqrt(self.counts)[:, None, None]
         n = periodogram.shape[0]
@@ -76,6 +79,22 @@ class FullWhittle:
         self.evaluations += 1
         S_nodes, dS = self.model.node_spectrum(theta)
         assert dS is not None
+        return self._store(key, np.asarray(theta, dtype=float), S_nodes, dS)
+
+    def seed(self, theta: np.ndarray, S_nodes: np.ndarray, dS_nodes: np.ndarray) -> None:
+        """Take S and dS/dθ at θ's nodes as given (an evaluation of an equal model: the
+        calibration's posterior starts where the fit ended), as :meth:`evaluate` would."""
+        theta = np.asarray(theta, dtype=float)
+        self._store(theta.tobytes(), theta, S_nodes, dS_nodes)
+
+    def evaluated(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(S, dS/dθ) at θ's nodes (raises ValueError where S is not positive definite)."""
+        self.at(theta)
+        assert self._S_nodes is not None and self._state is not None
+        return self._S_nodes, self._state[1]
+
+    def _store(self, key: bytes, theta: np.ndarray, S_nodes: np.ndarray,
+               dS: np.ndarray) -> tuple[float, np.ndarray]:
         S = self.model.to_targets(S_nodes)
         linv = _inverse_cholesky(S)
         self._key, self._dS, self._rows, self._hessian, self._sampled_rows = key, None, None, None, None
@@ -86,7 +105,8 @@ class FullWhittle:
         inv = _h(linv) @ linv
         W = self.model.to_nodes(self.counts[:, None, None] * (inv - inv @ self.periodogram @ inv))
         grad = (dS.reshape(dS.shape[0], -1) @ W.swapaxes(1, 2).ravel()).real  # Σ_k tr(W ∂S)
-        self._state, self._value = (S, dS, linv), (self._nll(linv), grad)
+        penalty = 0.5 * float(self.precision @ theta**2)
+        self._state, self._value = (S, dS, linv), (self._nll(linv) + penalty, grad + self.precision * theta)
         return self._value
 
     def fun(self, theta: np.ndarray) -> float:
@@ -147,10 +167,10 @@ class FullWhittle:
         if self._state is None:
             return np.eye(self.model.n_params)
         if self._sub.size == self.counts.size:
-            return ridged(self.fisher(theta))
+            return ridged(self.fisher(theta)) + np.diag(self.precision)
         if self._hessian is None:
             rows = self.sampled_rows(theta)
-            self._hessian = ridged(rows @ rows.T)
+            self._hessian = ridged(rows @ rows.T) + np.diag(self.precision)
         return self._hessian
 
     def sampled_rows(self, theta: np.ndarray) -> np.ndarray:

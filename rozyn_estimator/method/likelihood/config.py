@@ -35,7 +35,8 @@ class LikelihoodConfig:
     second_start: bool = param(True, "guard against wrong basins: a second start, the lower likelihood wins")
     self_calibrate: bool = param(True, "fit what the data can pin down as nuisances with their tolerances as "
                                  "priors: suspension stiffness and damping, the rear sensor's gain and delay "
-                                 "relative to the front one")
+                                 "relative to the front one (the full car: each sensor's gain and "
+                                 "position, the rear sensors' delay)")
     max_noise_share: float = param(0.5, "a channel fitted as more noise than this share of its power fails",
                                    low=0.0, open_low=True, high=1.0)
     covariance: str = param("expected", "information in the covariance sandwich: expected or observed",

@@ -1,0 +1,230 @@
+"""The full car's sensors calibrated by the data: each sensor's gain and position and the rear
+sensors' delay, nuisances of the augmented posterior with their tolerances as Gaussian priors
+(:func:`calibrate_sensors`; the half car's :mod:`rozyn_estimator.method.likelihood.augment`).
+
+Why not the first-order budget alone (:mod:`.refine_budget`): four sensors on one rigid body
+measure its three motions, and their one redundant combination shows what the assumed sensing
+gets wrong. With quiet sensors a gain or position off by its tolerance is many standard
+deviations of that combination, far beyond the budget's linear range: without sensor noise
+the budget put the roll inertia's std at 401 kg·m² where refitting with a sensor's gain 2 %
+off moved it by 0.4 (a noise floor absorbs the departure); with 0.005 m/s² of noise the fit
+bent the body's parameters to explain it (24 kg·m², the budget said 11). Fitted with their
+priors, the values the data pin down are corrected and the rest keep their tolerances.
+
+From the fit's optimum (the new values at the model's assumed ones) one scoring step of the
+posterior when no value moves by more than ``_FAR`` posterior std (the one-step estimator),
+else the fit's trust-region optimiser to the mode. The model then assumes the calibrated
+sensors (:class:`SensorCalibration`'s ``values``); what their remaining uncertainty adds to
+the estimate is the augmented inverse information's θ block beyond the fit's own,
+``A (F_ββ + P - F_βθ A)⁻¹ Aᵀ`` with ``A = F⁻¹ F_θβ``, split per value by the symmetric square
+root of the middle factor (:func:`_contributions`): when the data know nothing of the values
+that is the first-order budget's contributions, value by value.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import OptimizeResult, minimize
+
+from rozyn_estimator.method.full import sensing
+from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.whittle import FullWhittle, ridged
+from rozyn_estimator.method.likelihood.calibration import Calibration
+from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
+
+_FAR = 3.0  # a step longer than this many posterior std: beyond the linear range
+_CONVERGED = 0.01  # Newton decrement at which the optimiser has found the mode
+_HALVINGS = 4  # backtracking of the first step when it does not lower the posterior's ℓ
+_KEEP_MOVE = 0.01  # a warm update takes the calibration over while ln m, ln I, logit l_f, y_c [m] move less
+_KEEP_UPDATES = 10  # ... for at most this many windows (at 5 s apart: as many new seconds as half a window)
+_DEPARTED = 3.0  # a value further than this many tolerances from the file's gets a note
+_FIXED = 1e-6  # prior std of a value without a tolerance in a calibrated group (share, m)
+# each group's tolerance keys (what the budget leaves to the calibration)
+TOLERANCE_KEYS = {"gain": ("sensor_gain_front", "sensor_gain_rear"),
+                  "x": ("sensor_front_offset_m", "sensor_rear_offset_m"),
+                  "y": ("sensor_lateral_m",), "delay": ("sensor_time_offset_s",)}
+
+
+@dataclass(frozen=True)
+class SensorCalibration:
+    """The sensors as the data calibrated them (departures from the vehicle file's)."""
+
+    groups: tuple[str, ...]  # the calibrated groups (:data:`.sensing.GROUPS`)
+    values: np.ndarray  # the departures, every group's (:func:`.sensing.parameter_names`; 0 if not fitted)
+    calibrations: tuple[Calibration, ...]  # each calibrated value: estimate, posterior std, tolerance
+    contributions: dict[str, np.ndarray]  # what each value's remaining uncertainty adds to (5,)
+    body: np.ndarray  # θ's body parameters (ln m, ln I_xx, ln I_yy, logit l_f, y_c [m]) it was taken at
+    converged: bool = True  # False: the optimiser stopped at its iteration limit
+    age: int = 0  # the later windows that took it over
+
+    def holds(self, theta: np.ndarray) -> bool:
+        """A warm update may take it over (values and contributions): the body's parameters
+        moved by less than ``_KEEP_MOVE`` since, and it is younger than ``_KEEP_UPDATES``
+        windows (the sensors do not change; the later windows' data refresh it)."""
+        return self.converged and self.age < _KEEP_UPDATES and \
+            float(np.max(np.abs(theta[:5] - self.body))) < _KEEP_MOVE
+
+    def departures(self) -> list[str]:
+        """Notes on the values the data put further from the vehicle file's than ``_DEPARTED``
+        tolerances (and posterior std): the file, or the sensor, is off."""
+        return [f"sensor calibration: {c.name} {c.text()}: beyond its tolerance, check the vehicle file"
+                for c in self.calibrations if abs(c.estimate) > _DEPARTED * max(c.tolerance, c.std)]
+
+    def aged(self) -> SensorCalibration:
+        """The same, taken over by one more window."""
+        return dataclasses.replace(self, age=self.age + 1)
+
+    @property
+    def tolerance_keys(self) -> set[str]:
+        """The vehicle's tolerance keys the calibration stands for."""
+        return {key for g in self.groups for key in TOLERANCE_KEYS[g]}
+
+
+def sensor_groups(vehicle: FullVehicle, sensors: tuple[int, ...]) -> tuple[str, ...]:
+    """The groups the vehicle's tolerances call for (the delay with front and rear sensors only)."""
+    tol = vehicle.tolerances.to_dict()
+    both_axles = any(c < 2 for c in sensors) and any(c >= 2 for c in sensors)
+    return tuple(g for g in sensing.GROUPS if any(tol[key] > 0 for key in TOLERANCE_KEYS[g])
+                 and (g != "delay" or both_axles))
+
+
+def calibrate_sensors(
+    objective: FullWhittle, theta: np.ndarray, vehicle: FullVehicle, groups: tuple[str, ...],
+    start: np.ndarray | None = None, max_iter: int = 100,
+) -> tuple[np.ndarray, SensorCalibration]:
+    """(the fit's θ at the posterior's mode, the calibration) from the fit's optimum ``theta``
+    of ``objective`` (whose model assumes the sensors at ``start``, every group's values; None:
+    the vehicle's). Raises ValueError when the posterior is not finite there."""
+    base = objective.model
+    model = base.calibrating(groups)
+    n, k = base.n_params, base.k
+    names = model.names[model.calibration_slice]
+    stds = _prior_stds(vehicle, base.sensors, names)
+    precision = np.r_[np.zeros(n), 1.0 / stds**2]
+    posterior = FullWhittle(model, objective.periodogram, objective.counts, precision)
+    every = np.zeros(len(sensing.parameter_names(sensing.GROUPS, k))) if start is None else start
+    point = np.r_[theta, _pick(every, groups, k)]
+    S_nodes, dS_fit = objective.evaluated(theta)  # the same S: only the new derivatives are computed
+    posterior.seed(point, S_nodes, np.concatenate([dS_fit, model.calibration_derivatives(point)]))
+    value, grad = posterior.evaluate(point)
+    if not math.isfinite(value):
+        raise ValueError("the sensors' calibration: the posterior is not finite at the fit's optimum")
+    info = _information(posterior, point)
+    inv = np.linalg.inv(ridged(info) + np.diag(precision))
+    step = -inv @ grad
+    converged = True
+    if np.all(np.abs(step) <= _FAR * np.sqrt(np.abs(np.diag(inv)))):  # the one-step estimator: the
+        point = point + step  # information at its start stands for the mode's (as the half car's)
+    else:  # far off: the nuisances that absorbed the departure (a noise floor) must move back
+        found = minimize(posterior.fun, _backtracked(posterior, point, step, value), jac=posterior.jac,
+                         hess=posterior.hess, method="trust-exact", callback=_stop_at_mode(posterior),
+                         options={"gtol": 1e-12, "maxiter": max_iter})
+        point, converged = found.x, bool(found.success) or posterior.decrement(found.x) < _CONVERGED
+        info = _information(posterior, point)
+    contributions, posterior_std = _contributions(info, posterior.model, point, precision[n:], base.sensors)
+    fitted = point[n:]
+    calibrations = tuple(Calibration(*_reported(name, base.sensors, float(x), float(sd), float(tol)))
+                         for name, x, sd, tol in zip(names, fitted, posterior_std, stds, strict=True))
+    calibration = SensorCalibration(groups, _every(fitted, groups, k), calibrations, contributions,
+                                    point[:5].copy(), converged)
+    return point[:n], calibration
+
+
+def _contributions(info: np.ndarray, model: FullCarSpectrum, point: np.ndarray, precision: np.ndarray,
+                   sensors: tuple[int, ...]) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """(each calibrated value's contribution (5,) to the estimate, the values' posterior std)
+    from the data's information ``info`` of the augmented ``model``: the module docstring's
+    split of ``A M Aᵀ``, ``M`` the values' posterior covariance."""
+    n = model.calibration_slice.start
+    F, shared = ridged(info[:n, :n]), info[:n, n:]
+    A = np.linalg.solve(F, shared)
+    M = np.linalg.inv(info[n:, n:] + np.diag(precision) - shared.T @ A)
+    lam, vec = np.linalg.eigh(0.5 * (M + M.T))
+    root = (vec * np.sqrt(np.clip(lam, 0.0, None))) @ vec.T
+    per_value = model.physical_jacobian(point)[:, :n] @ A @ root
+    names = model.names[model.calibration_slice]
+    return ({_budget_name(name, sensors): per_value[:, j] for j, name in enumerate(names)},
+            np.sqrt(np.clip(np.diag(M), 0.0, None)))
+
+
+def _information(posterior: FullWhittle, point: np.ndarray) -> np.ndarray:
+    """The data's information at ``point`` summed as the optimiser's Hessian, over every 3rd
+    frequency (:meth:`~.whittle.FullWhittle.sampled_rows`: smooth in frequency; as the
+    first-order budget's, within ~1 %)."""
+    rows = posterior.sampled_rows(point)
+    return rows @ rows.T
+
+
+def _tolerance_key(name: str, sensors: tuple[int, ...]) -> tuple[str, int | None]:
+    """(the tolerance key, the sensor's corner; None for the delay) of a calibrated value."""
+    if name == "delay_ms":
+        return "sensor_time_offset_s", None
+    kind, index = name.rsplit("_", 1)
+    corner = sensors[int(index)]
+    axle = "front" if corner < 2 else "rear"
+    return {"ln_gain": f"sensor_gain_{axle}", "sensor_dx": f"sensor_{axle}_offset_m",
+            "sensor_dy": "sensor_lateral_m"}[kind], corner
+
+
+def _prior_stds(vehicle: FullVehicle, sensors: tuple[int, ...], names: list[str]) -> np.ndarray:
+    """Each calibrated value's tolerance in θ's units (a log gain: the share; m; ms)."""
+    tol = vehicle.tolerances.to_dict()
+    out = [tol[key] / (sensing.DELAY_SCALE_S if corner is None else 1.0)
+           for key, corner in (_tolerance_key(name, sensors) for name in names)]
+    return np.maximum(np.array(out), _FIXED)
+
+
+def _budget_name(name: str, sensors: tuple[int, ...]) -> str:
+    """The budget's name of a calibrated value (as :mod:`.refine_budget` names its moves)."""
+    key, corner = _tolerance_key(name, sensors)
+    return key if corner is None else f"{key}[{CORNERS[corner]}]"
+
+
+def _reported(name: str, sensors: tuple[int, ...], value: float, std: float,
+              tol: float) -> tuple[str, float, float, float]:
+    """(name, estimate, std, tolerance) as :class:`Calibration` reports them (SI; the name's
+    unit suffix picks the display: a gain in %, a position in mm, the delay in ms)."""
+    if name == "delay_ms":
+        s = sensing.DELAY_SCALE_S
+        return "sensor_time_offset_s", value * s, std * s, tol * s
+    kind, index = name.rsplit("_", 1)
+    corner = CORNERS[sensors[int(index)]]
+    label = {"ln_gain": f"sensor_gain_{corner}", "sensor_dx": f"sensor_x_{corner}_m",
+             "sensor_dy": f"sensor_y_{corner}_m"}[kind]
+    return label, (math.expm1(value) if kind == "ln_gain" else value), std, tol
+
+
+def _pick(every: np.ndarray, groups: tuple[str, ...], k: int) -> np.ndarray:
+    """The calibrated groups' values out of every group's."""
+    values = sensing.unpack(every, sensing.GROUPS, k)
+    values["delay"] = values["delay"] / sensing.DELAY_SCALE_S
+    return np.concatenate([values[g] for g in sensing.GROUPS if g in groups])
+
+
+def _every(fitted: np.ndarray, groups: tuple[str, ...], k: int) -> np.ndarray:
+    """Every group's values (zeros for those not calibrated) from the calibrated groups'."""
+    values = sensing.unpack(fitted, groups, k)
+    values["delay"] = values["delay"] / sensing.DELAY_SCALE_S
+    return np.concatenate([values[g] for g in sensing.GROUPS])
+
+
+def _backtracked(posterior: FullWhittle, point: np.ndarray, step: np.ndarray, value: float) -> np.ndarray:
+    """``point + step``, halved until the posterior does not get worse (at most a few times)."""
+    for _ in range(_HALVINGS):
+        if posterior.fun(point + step) <= value:
+            return point + step
+        step = 0.5 * step
+    return point
+
+
+def _stop_at_mode(posterior: FullWhittle) -> Callable[[OptimizeResult], None]:
+    """The optimiser's callback: stop once the posterior's Newton decrement is small."""
+    def stop(intermediate_result: OptimizeResult) -> None:
+        if posterior.decrement(intermediate_result.x) < _CONVERGED:
+            raise StopIteration
+    return stop
