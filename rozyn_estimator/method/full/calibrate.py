@@ -25,21 +25,19 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import OptimizeResult, minimize
 
 from rozyn_estimator.method.full import sensing
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
-from rozyn_estimator.method.full.whittle import FullWhittle, ridged
+from rozyn_estimator.method.full.whittle import FullWhittle, ridged, scoring
+from rozyn_estimator.method.likelihood.augment import backtracked
 from rozyn_estimator.method.likelihood.calibration import Calibration
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
 
 _FAR = 3.0  # a step longer than this many posterior std: beyond the linear range
 _CONVERGED = 0.01  # Newton decrement at which the optimiser has found the mode
-_HALVINGS = 4  # backtracking of the first step when it does not lower the posterior's ℓ
 _KEEP_MOVE = 0.01  # a warm update takes the calibration over while ln m, ln I, logit l_f, y_c [m] move less
 _KEEP_UPDATES = 10  # ... for at most this many windows (at 5 s apart: as many new seconds as half a window)
 _DEPARTED = 3.0  # a value further than this many tolerances from the file's gets a note
@@ -121,10 +119,8 @@ def calibrate_sensors(
     if np.all(np.abs(step) <= _FAR * np.sqrt(np.abs(np.diag(inv)))):  # the one-step estimator: the
         point = point + step  # information at its start stands for the mode's (as the half car's)
     else:  # far off: the nuisances that absorbed the departure (a noise floor) must move back
-        found = minimize(posterior.fun, _backtracked(posterior, point, step, value), jac=posterior.jac,
-                         hess=posterior.hess, method="trust-exact", callback=_stop_at_mode(posterior),
-                         options={"gtol": 1e-12, "maxiter": max_iter})
-        point, converged = found.x, bool(found.success) or posterior.decrement(found.x) < _CONVERGED
+        found = scoring(posterior, backtracked(posterior.fun, point, step, value), _CONVERGED, max_iter)
+        point, converged = found.x, bool(found.get("success")) or posterior.decrement(found.x) < _CONVERGED
         info = _information(posterior, point)
     contributions, posterior_std = _contributions(info, posterior.model, point, precision[n:], base.sensors)
     fitted = point[n:]
@@ -199,32 +195,21 @@ def _reported(name: str, sensors: tuple[int, ...], value: float, std: float,
     return label, (math.expm1(value) if kind == "ln_gain" else value), std, tol
 
 
+def _positions(groups: tuple[str, ...], k: int) -> np.ndarray:
+    """Where the calibrated groups' values sit among every group's (both θ's units)."""
+    chosen = set(sensing.parameter_names(groups, k))
+    every = sensing.parameter_names(sensing.GROUPS, k)
+    return np.array([i for i, name in enumerate(every) if name in chosen], dtype=int)
+
+
 def _pick(every: np.ndarray, groups: tuple[str, ...], k: int) -> np.ndarray:
     """The calibrated groups' values out of every group's."""
-    values = sensing.unpack(every, sensing.GROUPS, k)
-    values["delay"] = values["delay"] / sensing.DELAY_SCALE_S
-    return np.concatenate([values[g] for g in sensing.GROUPS if g in groups])
+    return every[_positions(groups, k)]
 
 
 def _every(fitted: np.ndarray, groups: tuple[str, ...], k: int) -> np.ndarray:
     """Every group's values (zeros for those not calibrated) from the calibrated groups'."""
-    values = sensing.unpack(fitted, groups, k)
-    values["delay"] = values["delay"] / sensing.DELAY_SCALE_S
-    return np.concatenate([values[g] for g in sensing.GROUPS])
+    out = np.zeros(len(sensing.parameter_names(sensing.GROUPS, k)))
+    out[_positions(groups, k)] = fitted
+    return out
 
-
-def _backtracked(posterior: FullWhittle, point: np.ndarray, step: np.ndarray, value: float) -> np.ndarray:
-    """``point + step``, halved until the posterior does not get worse (at most a few times)."""
-    for _ in range(_HALVINGS):
-        if posterior.fun(point + step) <= value:
-            return point + step
-        step = 0.5 * step
-    return point
-
-
-def _stop_at_mode(posterior: FullWhittle) -> Callable[[OptimizeResult], None]:
-    """The optimiser's callback: stop once the posterior's Newton decrement is small."""
-    def stop(intermediate_result: OptimizeResult) -> None:
-        if posterior.decrement(intermediate_result.x) < _CONVERGED:
-            raise StopIteration
-    return stop

@@ -50,14 +50,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import OptimizeResult, minimize
+from scipy.optimize import OptimizeResult
 
 from rozyn_estimator.method.full.calibrate import SensorCalibration, calibrate_sensors, sensor_groups
 from rozyn_estimator.method.full.intermittency import variance_factors
 from rozyn_estimator.method.full.refine_budget import refinement_contributions
 from rozyn_estimator.method.full.score import sandwich_ratio
 from rozyn_estimator.method.full.spectrum import BODY_NAMES, FullCarSpectrum, expected_periodogram_m2
-from rozyn_estimator.method.full.whittle import FullWhittle, ridged
+from rozyn_estimator.method.full.whittle import FullWhittle, ridged, scoring
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.covariance import NOISE_AT_ZERO
 from rozyn_estimator.method.likelihood.score import SandwichRatio
@@ -185,7 +185,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
 
     def run(theta0: np.ndarray, max_iter: int, cold: bool = False) -> None:
         nonlocal best, iterations, starts
-        res = _minimize(objective, ahead(theta0) if cold else theta0, fit_cfg, max_iter)
+        res = scoring(objective, ahead(theta0) if cold else theta0, fit_cfg.tol, max_iter)
         iterations, starts = iterations + int(res.nit), starts + 1
         if np.isfinite(res.fun) and (best is None or res.fun < best.fun):
             best = res
@@ -318,7 +318,7 @@ def _coarse_fit(spectra: Spectra, n: int, model: FullCarSpectrum,
     settings = dataclasses.replace(cfg, tol=_COARSE_TOL)
 
     def fit(theta: np.ndarray) -> np.ndarray:
-        res = _minimize(objective, theta, settings, cfg.max_iter)
+        res = scoring(objective, theta, settings.tol, cfg.max_iter)
         return res.x if np.isfinite(res.fun) else theta
 
     return fit
@@ -330,21 +330,6 @@ def _kernel_m2(n: int, fs: float, taper: float, counts: np.ndarray) -> np.ndarra
     an untapered window is taken as periodic, as the simulator's records are: no smoothing)."""
     window_m2 = expected_periodogram_m2(taper_window(n, taper), fs) if taper > 0 else 0.0
     return window_m2 + (fs / n) ** 2 * (counts**2 - 1.0) / 12.0
-
-
-def _minimize(objective: FullWhittle, theta0: np.ndarray, cfg: LikelihoodConfig,
-              max_iter: int) -> OptimizeResult:
-    """Scoring by scipy's trust-region method until the Newton decrement is below ``tol``."""
-    def stop_when_converged(intermediate_result: OptimizeResult) -> None:
-        if objective.decrement(intermediate_result.x) < cfg.tol:
-            raise StopIteration
-
-    if not np.isfinite(objective.fun(theta0)):
-        return OptimizeResult(x=theta0, fun=math.inf, nit=0)
-    if objective.decrement(theta0) < cfg.tol:
-        return OptimizeResult(x=theta0, fun=objective.fun(theta0), nit=0)
-    return minimize(objective.fun, theta0, jac=objective.jac, hess=objective.hess, method="trust-exact",
-                    callback=stop_when_converged, options={"gtol": 1e-12, "maxiter": max_iter})
 
 
 def _noise_free(warm: FullRefinement | None, power: np.ndarray) -> bool:

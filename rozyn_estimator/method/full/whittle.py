@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.optimize import OptimizeResult, minimize
 
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 
@@ -198,6 +199,21 @@ class FullWhittle:
         """The Newton decrement gᵀH⁻¹g (twice the ℓ a scoring step would still gain)."""
         _, grad = self.evaluate(theta)
         return float(grad @ np.linalg.solve(self.hess(theta), grad))
+
+
+def scoring(objective: FullWhittle, theta0: np.ndarray, tol: float, max_iter: int) -> OptimizeResult:
+    """Scoring by scipy's trust-region method (the Fisher information as the Hessian) until the
+    Newton decrement is below ``tol``; ``fun`` inf when θ0 gives no finite ℓ."""
+    def stop_when_converged(intermediate_result: OptimizeResult) -> None:
+        if objective.decrement(intermediate_result.x) < tol:
+            raise StopIteration
+
+    if not np.isfinite(objective.fun(theta0)):
+        return OptimizeResult(x=theta0, fun=math.inf, nit=0)
+    if objective.decrement(theta0) < tol:
+        return OptimizeResult(x=theta0, fun=objective.fun(theta0), nit=0)
+    return minimize(objective.fun, theta0, jac=objective.jac, hess=objective.hess, method="trust-exact",
+                    callback=stop_when_converged, options={"gtol": 1e-12, "maxiter": max_iter})
 
 
 def ridged(m: np.ndarray) -> np.ndarray:

@@ -27,6 +27,7 @@ unidentified combinations where the tolerances put them.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -115,7 +116,8 @@ def calibrate(objective: WhittleObjective, model: HalfCarSpectrum, theta: np.nda
         if augmented.decrement(intermediate_result.x) < _CONVERGED:
             raise StopIteration
 
-    found = minimize(augmented.fun, _backtracked(augmented, start, step, value), jac=augmented.jac,
+    found = minimize(augmented.fun, backtracked(lambda th: _posterior(augmented, th), start, step, value),
+                     jac=augmented.jac,
                      hess=augmented.hess, method="trust-exact", callback=stop_at_the_mode,
                      options={"gtol": 1e-12, "maxiter": max_iter})
     converged = bool(found.success) or augmented.decrement(found.x) < _CONVERGED
@@ -135,12 +137,13 @@ def _newton_step(
     return step, std
 
 
-def _backtracked(
-    objective: WhittleObjective, point: np.ndarray, step: np.ndarray, value: float
+def backtracked(
+    posterior: Callable[[np.ndarray], float], point: np.ndarray, step: np.ndarray, value: float
 ) -> np.ndarray:
-    """``point + step``, halved until the posterior does not get worse (at most a few times)."""
+    """``point + step``, halved until the ``posterior``'s ℓ does not exceed ``value`` (at most a
+    few times); ``point`` when none does."""
     for _ in range(_HALVINGS):
-        if _posterior(objective, point + step) <= value:
+        if posterior(point + step) <= value:
             return point + step
         step = 0.5 * step
     return point
