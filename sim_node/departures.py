@@ -1,10 +1,13 @@
 """How the simulated vehicle departs from the estimator's model, the way real vehicles do.
 
-The estimator models the exact linear half car with ideal, synchronised accelerometers.
-A real vehicle departs from it; the simulator can too (issue 10), so that the estimator's
-published uncertainty can be tested against a plant it does not describe exactly. The
-estimator is never told: its vehicle file stays nominal. Every default is the exact
-half car, and a run with every departure off is bit for bit the run without them.
+The estimator models the exact linear half car (or full car) with ideal, synchronised
+accelerometers. A real vehicle departs from it; the simulator can too (issue 10), so that
+the estimator's published uncertainty can be tested against a plant it does not describe
+exactly. The estimator is never told: its vehicle file stays nominal. Every default is the
+exact vehicle, and a run with every departure off is bit for bit the run without them.
+The full car takes each departure at each corner: the suspension's laws at all four, the
+front (rear) gain error in both front (rear) sensors plus each sensor's own
+(``corner_gain_errors``), the time offset in both rear sensors.
 
 Plant (the suspension of both axles; sign convention: the extension ``e`` of a corner is
 the body point above the axle minus the wheel, ``e = x_s + l_f phi - x_t,f`` at the front
@@ -41,6 +44,7 @@ import numpy as np
 
 from rozyn_estimator.parameters import check, param
 from rozyn_estimator.vehicle import Vehicle
+from rozyn_estimator.vehicle_full import FullVehicle
 
 _GAIN = {"low": -0.5, "high": 0.5, "read_only": True}
 
@@ -63,13 +67,17 @@ class Departures:
                                       read_only=True)
     spring_reference_m: float = param(0.05, "e_ref of the progressive springs", unit="m", low=0.0,
                                       open_low=True, high=1.0, read_only=True)
-    gain_error_front: float = param(0.0, "front accelerometer scale factor error: it reads (1 + error) "
-                                    "times the specific force", **_GAIN)
-    gain_error_rear: float = param(0.0, "rear accelerometer scale factor error: it reads (1 + error) "
-                                   "times the specific force", **_GAIN)
-    time_offset_s: float = param(0.0, "rear accelerometer late by this: its sample stamped t holds the "
-                                 "specific force at t - offset (negative: the front one is late)", unit="s",
+    gain_error_front: float = param(0.0, "front accelerometer scale factor error (model full: both front "
+                                    "ones): it reads (1 + error) times the specific force", **_GAIN)
+    gain_error_rear: float = param(0.0, "rear accelerometer scale factor error (model full: both rear ones): "
+                                   "it reads (1 + error) times the specific force", **_GAIN)
+    time_offset_s: float = param(0.0, "rear accelerometer (model full: both rear ones) late by this: its "
+                                 "sample stamped t holds the specific force at t - offset (negative: the "
+                                 "front one is late)", unit="s",
                                  low=-0.1, high=0.1, read_only=True)
+    corner_gain_errors: tuple[float, float, float, float] = param(
+        (0.0, 0.0, 0.0, 0.0), "model full: each accelerometer's own scale factor error (FL, FR, RL, RR), "
+        "added to its axle's gain_error_front/rear", length=4, **_GAIN)
     lowpass_hz: float = param(0.0, "cutoff of a 2nd-order Butterworth low-pass in both accelerometers, "
                               "run at the plant's internal rate; 0: none", unit="Hz", low=0.0,
                               high=10_000.0, read_only=True)
@@ -83,38 +91,57 @@ class Departures:
         return self.damper_ratio != 1.0 or self.spring_progression != 0.0
 
     @property
-    def gains(self) -> tuple[float, float] | None:
+    def gains(self) -> tuple[float, ...] | None:
         """(front, rear) factors on the specific force; None when both are exactly 1."""
         if self.gain_error_front == 0.0 and self.gain_error_rear == 0.0:
             return None
         return (1.0 + self.gain_error_front, 1.0 + self.gain_error_rear)
 
     @property
+    def corner_gains(self) -> tuple[float, ...] | None:
+        """The full car's (FL, FR, RL, RR) factors; None when all are exactly 1."""
+        axle = (self.gain_error_front,) * 2 + (self.gain_error_rear,) * 2
+        errors = tuple(a + c for a, c in zip(axle, self.corner_gain_errors, strict=True))
+        return None if not any(errors) else tuple(1.0 + e for e in errors)
+
+    @property
     def delays_s(self) -> tuple[float, float]:
         """(front, rear) delay of each sensor's samples behind their stamps [s], both >= 0."""
         return (max(-self.time_offset_s, 0.0), max(self.time_offset_s, 0.0))
 
-    def suspension(self, vehicle: Vehicle) -> SuspensionLaw | None:
-        """The nonlinear part of ``vehicle``'s suspension; None when it is linear."""
+    @property
+    def corner_delays_s(self) -> tuple[float, ...]:
+        """The full car's (FL, FR, RL, RR) delays [s]: each axle's as :attr:`delays_s`."""
+        front, rear = self.delays_s
+        return (front, front, rear, rear)
+
+    def suspension(self, vehicle: Vehicle | FullVehicle) -> SuspensionLaw | None:
+        """The nonlinear part of ``vehicle``'s suspension (per axle, or per corner of a full
+        car); None when it is linear."""
         if not self.nonlinear:
             return None
-        return SuspensionLaw(
-            stiffness_npm=(vehicle.suspension_stiffness_front_npm, vehicle.suspension_stiffness_rear_npm),
-            damping_nspm=(vehicle.suspension_damping_front_nspm, vehicle.suspension_damping_rear_nspm),
-            damper_ratio=self.damper_ratio, progression=self.spring_progression,
-            reference_m=self.spring_reference_m,
-        )
+        stiffness: tuple[float, ...]
+        damping: tuple[float, ...]
+        if isinstance(vehicle, FullVehicle):
+            stiffness, damping = vehicle.suspension_stiffness_npm, vehicle.suspension_damping_nspm
+        else:
+            stiffness = (vehicle.suspension_stiffness_front_npm, vehicle.suspension_stiffness_rear_npm)
+            damping = (vehicle.suspension_damping_front_nspm, vehicle.suspension_damping_rear_nspm)
+        return SuspensionLaw(stiffness_npm=tuple(stiffness), damping_nspm=tuple(damping),
+                             damper_ratio=self.damper_ratio, progression=self.spring_progression,
+                             reference_m=self.spring_reference_m)
 
 
 @dataclass(frozen=True)
 class SuspensionLaw:
-    """The suspension tension beyond the linear ``k e + c v`` of each corner (front, rear).
+    """The suspension tension beyond the linear ``k e + c v`` of each corner (the half car's
+    front and rear, the full car's FL, FR, RL, RR).
 
     See the module's docstring for the sign convention and the laws.
     """
 
-    stiffness_npm: tuple[float, float]
-    damping_nspm: tuple[float, float]
+    stiffness_npm: tuple[float, ...]  # per corner
+    damping_nspm: tuple[float, ...]  # per corner
     damper_ratio: float = 1.0
     progression: float = 0.0
     reference_m: float = 0.05
@@ -125,7 +152,7 @@ class SuspensionLaw:
         return (self.damper_ratio - 1.0) / (self.damper_ratio + 1.0)
 
     def extra_tension_n(self, extension_m: np.ndarray, velocity_mps: np.ndarray) -> np.ndarray:
-        """``F - (k e + c v)`` [N] of each corner; arrays ``(..., 2)`` of ``e`` [m] and ``v`` [m/s]."""
+        """``F - (k e + c v)`` [N] of each corner; arrays ``(..., corners)`` of ``e`` [m] and ``v`` [m/s]."""
         out = np.zeros(np.broadcast_shapes(np.shape(extension_m), np.shape(velocity_mps)))
         if self.damper_ratio != 1.0:
             out += self.asymmetry * np.asarray(self.damping_nspm) * np.abs(velocity_mps)

@@ -24,24 +24,21 @@ tyres enters as displacement (``k_t``) and velocity (``c_t``), and the model is
 discretised exactly (first-order hold) and propagated in modal blocks by
 :mod:`sim_node.modal`, as the half car is.
 
-The linear model only: the simulator's nonlinear suspension and sensor timing departures
-(:mod:`sim_node.departures`) are the half car's (:class:`sim_node.simulation.SimConfig`
-refuses them with ``model: full``).
+The departures (:mod:`sim_node.departures`) as the half car's: a nonlinear suspension at
+each corner (the anti-roll bars stay linear) and delayed sensors, run by
+:class:`sim_node.plant.SuspendedPlant`.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from rozyn_estimator.vehicle_full import FullVehicle
-from sim_node.modal import (
-    ModalPropagator,
-    SecondOrderModel,
-    StateSpace,
-    natural_modes_of,
-    state_space_of,
-    static_state_of,
-)
+from sim_node.departures import SuspensionLaw
+from sim_node.modal import SecondOrderModel, StateSpace, natural_modes_of, state_space_of, static_state_of
+from sim_node.plant import SuspendedPlant
 
 N_DOF = 7
 N_STATE = 2 * N_DOF
@@ -110,8 +107,8 @@ def static_state(v: FullVehicle, road_m: np.ndarray) -> np.ndarray:
     return static_state_of(second_order_model(v), road_m)
 
 
-class FullCarPlant:
-    """Exact-discretised full car, propagated block by block (linear).
+class FullCarPlant(SuspendedPlant):
+    """Exact-discretised full car, propagated block by block.
 
     Args:
         vehicle: the vehicle.
@@ -120,6 +117,8 @@ class FullCarPlant:
         u0: road displacement (FL, FR, RL, RR) at the first step, for the state shift [m].
         points_m: (k, 2) body points ``(x, y)`` whose vertical acceleration is the output
             (default: the vehicle's four accelerometers, FL, FR, RL, RR).
+        suspension: the suspension's nonlinear part, per corner (None: linear).
+        delays_s: each output's delay behind its step [s], >= 0 (empty: none).
 
     Example:
         >>> plant = FullCarPlant(FullVehicle(), dt_s=0.002)
@@ -128,44 +127,12 @@ class FullCarPlant:
     """
 
     def __init__(self, vehicle: FullVehicle, dt_s: float, x0: np.ndarray | None = None,
-                 u0: np.ndarray | None = None, points_m: np.ndarray | None = None) -> None:
-        if not dt_s > 0.0:
-            raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
+                 u0: np.ndarray | None = None, points_m: np.ndarray | None = None,
+                 suspension: SuspensionLaw | None = None, delays_s: Sequence[float] = ()) -> None:
         self.vehicle = vehicle
-        self.dt_s = float(dt_s)
-        self._modal = ModalPropagator(state_space(vehicle, points_m), self.dt_s, "full-car")
-        x0 = np.zeros(N_STATE) if x0 is None else np.asarray(x0, dtype=float)
-        u0 = np.zeros(N_TYRES) if u0 is None else np.asarray(u0, dtype=float)
-        if x0.shape != (N_STATE,) or u0.shape != (N_TYRES,):
-            raise ValueError(f"x0 must have shape ({N_STATE},) and u0 ({N_TYRES},), got {x0.shape}, "
-                             f"{u0.shape}")
-        self._z = self._modal.modal_state(x0, u0)
-
-    @property
-    def state(self) -> np.ndarray:
-        """Internal (shifted, modal) state; opaque, but enough to continue a run."""
-        return self._z.copy()
-
-    def run(self, road_m: np.ndarray) -> np.ndarray:
-        """Advance over a block of road displacements.
-
-        Args:
-            road_m: (n, 4) road displacement under the FL, FR, RL, RR tyres at steps k,
-                k+1, … [m]; the first row is the road at the current state's time.
-
-        Returns:
-            (n, k) body vertical acceleration at the output points at those steps
-            [m/s^2], gravity excluded.
-        """
-        u = np.asarray(road_m, dtype=float)
-        if u.ndim != 2 or u.shape[1] != N_TYRES:
-            raise ValueError(f"road_m must have shape (n, {N_TYRES}), got {u.shape}")
-        n = u.shape[0]
-        if n == 0:
-            return np.zeros((0, self._modal.dd.shape[0]))
-        out, z = self._modal.run(u, self._z)
-        self._z = z[:, n]
-        return out
+        points = sensor_points(vehicle) if points_m is None else points_m
+        super().__init__(second_order_model(vehicle), body_rows(vehicle, points), suspension_rows(vehicle),
+                         dt_s, x0=x0, u0=u0, suspension=suspension, delays_s=delays_s, what="full-car")
 
 
 def free_decay(vehicle: FullVehicle, x0: np.ndarray, dt_s: float, n: int) -> np.ndarray:

@@ -99,10 +99,12 @@ def sim_config(values: dict[str, Any]) -> SimConfig:
     ``vehicle_file``, or the full car (``model: full``) when ``vehicle.model`` is ``full`` or
     the file says so. Raises ConfigError naming the first invalid parameter."""
     others = {k: v for k, v in values.items() if not k.startswith("vehicle.")}
-    config: SimConfig = build(NODE_DEFAULTS, others)
     vehicle = any_vehicle_from_parameters(values)
-    if isinstance(vehicle, FullVehicle):
-        return dataclasses.replace(config, model="full", full_vehicle=vehicle)
+    if isinstance(vehicle, FullVehicle):  # the model first: the departures' rules depend on it
+        model_full = dataclasses.replace(NODE_DEFAULTS, model="full", full_vehicle=vehicle)
+        full: SimConfig = build(model_full, others)
+        return full
+    config: SimConfig = build(NODE_DEFAULTS, others)
     return dataclasses.replace(config, vehicle=vehicle)
 
 

@@ -9,7 +9,8 @@ body at the sensor, through the sensor's departures (:mod:`sim_node.departures`)
    carries over between blocks and starts settled on the first value. Gravity is a
    constant and the filter's gain at 0 Hz is 1, so filtering before adding it is the same;
 2. sampling at the output rate (every ``oversample``-th plant step);
-3. a gain per sensor on the specific force: ``(1 + gain_error) (a + g)``;
+3. a gain per sensor on the specific force: ``(1 + gain_error) (a + g)`` (the full car's:
+   its axle's error plus the sensor's own, :attr:`Departures.corner_gains`);
 4. the sensor's bias (then the simulation adds its white noise).
 
 The time offset between the sensors is the plant's (a delayed output,
@@ -35,15 +36,16 @@ class Accelerometers:
         plant_rate_hz: the rate of the accelerations given to :meth:`lowpass`.
         bias_mps2: constant offsets, one per channel (front, rear).
         include_gravity: add +g to the specific force (REP 145).
+        full_car: the full car's four sensors (FL, FR, RL, RR), else the half car's two.
     """
 
     def __init__(self, departures: Departures, plant_rate_hz: float, bias_mps2: tuple[float, ...],
-                 include_gravity: bool) -> None:
+                 include_gravity: bool, full_car: bool = False) -> None:
         self._sos = None
         if departures.lowpass_hz > 0.0:
             self._sos = butter(LOWPASS_ORDER, departures.lowpass_hz, fs=plant_rate_hz, output="sos")
         self._state: np.ndarray | None = None
-        gains = departures.gains
+        gains = departures.corner_gains if full_car else departures.gains
         self._gains = None if gains is None else np.asarray(gains)
         self._bias = np.asarray(bias_mps2, dtype=float)
         self._gravity = GRAVITY_MPS2 if include_gravity else 0.0

@@ -16,7 +16,6 @@ sensors' low-pass; the half car stays the default and its runs are unchanged.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from typing import ClassVar
@@ -88,9 +87,8 @@ class SimConfig:
                 c.full_vehicle, FullVehicle)), "is the full car's: a FullVehicle, with model full"),
             ("vehicle", lambda c: c.model == "half" or c.vehicle == Vehicle(),
              "is the half car's; with model full the plant is full_vehicle"),
-            ("departures", lambda c: c.model == "half"
-             or dataclasses.replace(c.departures, lowpass_hz=0.0) == Departures(),
-             "with model full only lowpass_hz is simulated (the other departures are the half car's)"),
+            ("departures", lambda c: c.model == "full" or c.departures.corner_gain_errors == (0.0,) * 4,
+             "corner_gain_errors are the full car's (model full); the half car's are gain_error_front/rear"),
             ("bias_mps2", lambda c: c.model == "half" or c.bias_mps2 == (0.0, 0.0),
              "the full car's accelerometers take no bias: must be (0, 0) with model full"),
         ))
@@ -157,14 +155,17 @@ class Simulation:
         x0 = self._initial_state(u0)
         self.plant: HalfCarPlant | fullcar.FullCarPlant
         if isinstance(vehicle, FullVehicle):
-            self.plant = fullcar.FullCarPlant(vehicle, self._dt, x0=x0, u0=u0)
+            self.plant = fullcar.FullCarPlant(vehicle, self._dt, x0=x0, u0=u0,
+                                              suspension=cfg.departures.suspension(vehicle),
+                                              delays_s=cfg.departures.corner_delays_s)
             bias: tuple[float, ...] = (0.0,) * len(CORNERS)
         else:
             self.plant = HalfCarPlant(cfg.vehicle, self._dt, x0=x0, u0=u0,
                                       suspension=cfg.departures.suspension(cfg.vehicle),
                                       delays_s=cfg.departures.delays_s)
             bias = cfg.bias_mps2
-        self.sensors = Accelerometers(cfg.departures, 1.0 / self._dt, bias, cfg.include_gravity)
+        self.sensors = Accelerometers(cfg.departures, 1.0 / self._dt, bias, cfg.include_gravity,
+                                      full_car=isinstance(vehicle, FullVehicle))
         if self._step < 0:
             self._advance(-self._step)
 

@@ -206,7 +206,7 @@ def test_simulation_identical_tracks_drive_no_roll():
 @pytest.mark.parametrize(
     ("changes", "field"),
     [({"full_vehicle": FullVehicle()}, "full_vehicle"),
-     ({"model": "full", "departures": Departures(damper_ratio=2.0)}, "departures"),
+     ({"departures": Departures(corner_gain_errors=(0.01, 0.0, 0.0, 0.0))}, "corner_gain_errors"),
      ({"model": "full", "bias_mps2": (0.1, 0.0)}, "bias_mps2"),
      ({"model": "full", "initial_state": (0.0,) * 8}, "initial_state"),
      ({"model": "full", "vehicle": Vehicle(sprung_mass_kg=900.0)}, "vehicle"),

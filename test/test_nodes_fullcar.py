@@ -156,9 +156,18 @@ def test_invalid_full_car_parameters_are_refused_at_startup(ros, capsys):
     ):
         with pytest.raises(ConfigError, match=words):
             EstimatorNode(context=ros.context, parameter_overrides=overrides)
-    with pytest.raises(ConfigError, match="with model full only lowpass_hz is simulated"):
-        SimNode(context=ros.context, parameter_overrides=[Parameter("vehicle_file", value=FULL_FILE),
-                                                          Parameter("departures.damper_ratio", value=2.0)])
+    with pytest.raises(ConfigError, match="corner_gain_errors are the full car's"):
+        SimNode(context=ros.context, parameter_overrides=[
+            Parameter("departures.corner_gain_errors", value=[0.01, 0.0, 0.0, 0.0])])
+    departed = SimNode(context=ros.context, parameter_overrides=[
+        Parameter("vehicle_file", value=FULL_FILE), Parameter("departures.damper_ratio", value=2.0),
+        Parameter("departures.corner_gain_errors", value=[0.01, 0.0, -0.02, 0.0])])
+    try:  # the full car takes the departures, per corner
+        assert departed.config.departures.corner_gains == (1.01, 1.0, 0.98, 1.0)
+        departed.sim.next_block(10)
+        assert departed.sim.plant.iterations > 1  # the nonlinear dampers' fixed point, at every corner
+    finally:
+        departed.destroy_node()
     done = subprocess.run([str(BIN / "estimator_node"), "--ros-args", "-p", "vehicle.model:=full",
                            "-p", f"vehicle_file:={ROOT / 'config' / 'vehicle.yaml'}"],
                           env=dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN + 1)), capture_output=True, text=True,
