@@ -72,9 +72,10 @@ def test_the_cli_prints_json_records_per_method(capsys):
 
 
 @pytest.mark.parametrize(("argv", "message"), [
-    (["--damper-ratio", "2"], "--damper-ratio: not available with --model full"),
+    (["--speed-variation", "0.1"], "--speed-variation: not available with --model full"),
+    (["--bias-mps2", "0.1", "0"], "--bias-mps2: not available with --model full"),
     (["--methods", "thesis"], "the full car has likelihood, rozyn"),
-    (["--suite", "mismatch"], "--model full has the acceptance suite"),
+    (["--suite", "robustness"], "--model full has the suites acceptance, mismatch"),
     (["--vehicle", "config/vehicle.yaml"], "half-car vehicle file"),
 ])
 def test_what_the_full_car_cannot_compare_is_refused(argv, message, capsys):

@@ -5,9 +5,13 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
+from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method.full import FULL_PARAM_NAMES
 from rozyn_estimator.tools.cli import main
+from rozyn_estimator.tools.trial_full import told_vehicle
+from rozyn_estimator.vehicle_full import FullVehicle
 
 
 def _records(capsys) -> list[dict]:
@@ -46,9 +50,35 @@ def test_what_the_full_car_cannot_do_is_refused_with_a_reason(capsys):
     assert "the full car has likelihood, rozyn" in capsys.readouterr().err
     assert main(["trial", "--model", "full", "--vehicle", "config/vehicle.yaml"]) == 1
     assert "half-car vehicle file" in capsys.readouterr().err
-    for option in (["--damper-ratio", "2"], ["--gain-error", "0.03", "0"], ["--stiffness-error", "0.05"]):
-        assert main(["trial", "--model", "full", *option]) == 1, option
-        assert f"{option[0]}: not available with --model full" in capsys.readouterr().err
+    assert main(["trial", "--model", "full", "--road", "free-decay"]) == 1
+    assert "ISO 8608 or Laplace" in capsys.readouterr().err
+
+
+def test_the_full_car_takes_the_departures_and_the_wrong_values(capsys):
+    base = ["trial", "--model", "full", "--json", "--duration-s", "60", "--noise-fraction", "0.1"]
+    assert main(base) == 0
+    plain = _records(capsys)[0]
+    assert main([*base, "--corner-gain-errors", "0.05", "0", "0", "0", "--damper-ratio", "1.5",
+                 "--stiffness-error", "0.05"]) == 0
+    moved = _records(capsys)[0]
+    assert moved["status"] == "ok" and moved["truth"] == plain["truth"]
+    assert moved["mass_kg"] != plain["mass_kg"]
+
+
+def test_the_estimator_is_told_each_corners_value_off():
+    v = FullVehicle()
+    told = told_vehicle(v, {"stiffness_error": 0.1, "unsprung_mass_error": -0.2, "damping_error": 0.0})
+    assert told is not None and told.suspension_stiffness_npm == pytest.approx([24750, 24750, 44000, 44000])
+    assert told.unsprung_mass_kg == pytest.approx([16, 16, 26, 26])
+    assert told.suspension_damping_nspm == v.suspension_damping_nspm
+    assert told_vehicle(v, {"stiffness_error": 0.0}) is None
+    with pytest.raises(ConfigError, match="stiffness_error"):
+        told_vehicle(v, {"stiffness_error": -1.0})
+
+
+def test_corner_gains_are_refused_for_the_half_car(capsys):
+    assert main(["trial", "--corner-gain-errors", "0.01", "0", "0", "0"]) == 1
+    assert "corner_gain_errors" in capsys.readouterr().err
 
 
 def test_the_table_names_the_five_parameters(capsys):

@@ -6,61 +6,39 @@ method (``likelihood``, ``rozyn``) estimates from the very same samples. Per met
 parameter: mean, bias (per cent; the lateral CoG in millimetres), spread, the mean
 reported std, 95 % coverage, failures and the median time per estimate; with
 ``--suite acceptance`` each case's verdict against its bars. ``--vehicle-preset second``
-swaps in a second, clearly different full car (:data:`SECOND_FULL_VEHICLE`).
+swaps in a second, clearly different full car; the suites are :mod:`.full_suites`'.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import sys
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import cast
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS
 from rozyn_estimator.method.full import FULL_PARAM_NAMES, FullEstimate, estimate_full
+from rozyn_estimator.tools.full_suites import (
+    FULL_PRESETS,
+    FULL_SUITES,
+    FullBars,
+    FullCase,
+    acceptance_cases,
+    mismatch_cases,
+)
+from rozyn_estimator.tools.options import departure_values, vehicle_error_values
 from rozyn_estimator.tools.trial import parallel_map, parse_seeds
-from rozyn_estimator.tools.trial_full import METHODS_FULL, FullTrialSpec, simulate_full
-from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle, load_full_vehicle
+from rozyn_estimator.tools.trial_full import METHODS_FULL, FullTrialSpec, simulate_full, told_vehicle
+from rozyn_estimator.vehicle_full import load_full_vehicle
+from sim_node.departures import Departures
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig
 
-# A second full car, clearly different from Table 5-1 extended: an SUV's mass and inertias,
-# a longer wheelbase and wider tracks (the rear wider), its CoG 3 cm left of the centreline,
-# stiffer tyres and suspension, heavier wheels, anti-roll bars on both axles.
-SECOND_FULL_VEHICLE = FullVehicle(
-    sprung_mass_kg=1800.0, pitch_inertia_kgm2=3200.0, roll_inertia_kgm2=650.0, cog_from_front_axle_m=1.55,
-    cog_lateral_m=0.03, wheelbase_m=3.2, track_front_m=1.62, track_rear_m=1.65,
-    unsprung_mass_kg=(27.5, 27.5, 37.5, 37.5), tyre_stiffness_npm=(130e3, 130e3, 140e3, 140e3),
-    tyre_damping_nspm=(50.0,) * 4, suspension_stiffness_npm=(30e3, 30e3, 45e3, 45e3),
-    suspension_damping_nspm=(1900.0, 1900.0, 2250.0, 2250.0), anti_roll_stiffness_front_nmprad=25e3,
-    anti_roll_stiffness_rear_nmprad=10e3, sensor_x_m=(0.0, 0.0, 3.2, 3.2),
-    sensor_y_m=(0.81, -0.81, 0.825, -0.825),
-)
-FULL_PRESETS = {"table5-1": FullVehicle(), "second": SECOND_FULL_VEHICLE}
 LABELS = ("m [kg]", "I_xx [kg m^2]", "I_yy [kg m^2]", "l_f [m]", "y_c [m]")
-
-
-@dataclass(frozen=True)
-class FullBars:
-    """A case's bars: |bias| in per cent for m, I_xx, I_yy, l_f and in metres for y_c."""
-
-    bias_pct: float = 0.5
-    bias_lateral_m: float = 0.005
-    coverage: tuple[float, float] = (0.90, 0.98)
-    failure_share: float = 0.01
-
-
-@dataclass(frozen=True)
-class FullCase:
-    label: str
-    spec: FullTrialSpec
-    bars: FullBars | None = None
 
 
 @dataclass(frozen=True)
@@ -76,6 +54,7 @@ class FullSummary:
     mean_reported_std: np.ndarray
     coverage_95: np.ndarray
     median_ms: float
+    rms_error: np.ndarray = field(default_factory=lambda: np.full(5, np.nan))  # the parameters' units
 
     def missed(self, bars: FullBars) -> list[str]:
         """Which bars it misses (empty: all met)."""
@@ -83,10 +62,13 @@ class FullSummary:
         lo, hi = bars.coverage
         for i, name in enumerate(FULL_PARAM_NAMES):
             limit = bars.bias_lateral_m if i == 4 else bars.bias_pct
-            if not abs(self.bias[i]) <= limit:
+            if limit is not None and not abs(self.bias[i]) <= limit:
                 out.append(f"bias {name} {self.bias[i]:+.3g}")
             if not lo <= self.coverage_95[i] <= hi:
                 out.append(f"coverage {name} {self.coverage_95[i]:.2f}")
+            limit = bars.max_std_per_rms
+            if limit is not None and not self.mean_reported_std[i] <= limit * self.rms_error[i]:
+                out.append(f"std {name} {self.mean_reported_std[i] / self.rms_error[i]:.2g}x its rms error")
         return out
 
 
@@ -105,22 +87,7 @@ def summarise_full(estimates: Sequence[FullEstimate], truth: np.ndarray) -> Full
         spread=p.std(axis=0, ddof=1) if len(ok) > 1 else nan, bias=bias,
         mean_reported_std=np.sqrt(np.mean(std**2, axis=0)),
         coverage_95=np.mean(np.abs(err) <= 1.96 * std, axis=0),
-        median_ms=float(np.median([e.elapsed_ms for e in ok])))
-
-
-def acceptance_cases(vehicle: FullVehicle) -> list[FullCase]:
-    """Issue 13's cases on ``vehicle`` known exactly (the estimator's own statistics): Gaussian
-    ISO A with 10 % sensor noise for 120 s at 30, 50, 70 and 100 km/h, and the Laplace road
-    (ν = 1) at 100 km/h."""
-    exact = dataclasses.replace(vehicle, tolerances=cast(FullTolerances, FullTolerances.none()))
-
-    def case(label: str, road: RoadSpec, speed_kmh: float) -> FullCase:
-        sim = SimConfig(model="full", full_vehicle=exact, road=road, speed_kmh=speed_kmh, duration_s=120.0)
-        return FullCase(label, FullTrialSpec(sim=sim, noise_fraction=0.1), FullBars())
-
-    gaussian = RoadSpec(amplitudes="gaussian")
-    return [case(f"Gaussian ISO A, {v:g} km/h", gaussian, v) for v in (30.0, 50.0, 70.0, 100.0)] + \
-        [case("Laplace road (nu 1), 100 km/h", RoadSpec(kind="laplace", laplace_nu=1.0), 100.0)]
+        median_ms=float(np.median([e.elapsed_ms for e in ok])), rms_error=np.sqrt(np.mean(err**2, axis=0)))
 
 
 def _run_seed(item: tuple[FullTrialSpec, tuple[str, ...], int]) -> dict[str, FullEstimate]:
@@ -184,30 +151,33 @@ def case_records(case: FullCase, results: dict[str, list[FullEstimate]]) -> list
     return out
 
 
-_HALF_ONLY = {"damper_ratio": 1.0, "spring_progression": 0.0, "lowpass_hz": 0.0, "time_offset_s": 0.0,
-              "speed_variation": 0.0, "endless_road": False, "sensor_offsets_m": None}
+_HALF_ONLY = {"speed_variation": 0.0, "endless_road": False, "sensor_offsets_m": None}
 
 
 def run(args: argparse.Namespace) -> int:
     """``rozyn compare --model full``."""
     given = [f"--{k.replace('_', '-')}" for k, default in _HALF_ONLY.items()
              if getattr(args, k, default) != default]
-    if given or tuple(getattr(args, "gain_error", (0.0, 0.0))) != (0.0, 0.0):
-        raise ConfigError(f"{', '.join(given) or '--gain-error'}: not available with --model full (the half "
-                          "car's departures and sensor options)")
-    if args.suite not in (None, "acceptance"):
-        raise ConfigError(f"suite: --model full has the acceptance suite; got {args.suite!r}")
+    if given or tuple(getattr(args, "bias_mps2", (0.0, 0.0))) != (0.0, 0.0):
+        raise ConfigError(f"{', '.join(given) or '--bias-mps2'}: not available with --model full (the half "
+                          "car's sensor options)")
+    if args.suite not in (None, *FULL_SUITES):
+        raise ConfigError(f"suite: --model full has the suites {', '.join(FULL_SUITES)}; got {args.suite!r}")
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     methods = [m for m in methods if m in METHODS_FULL] if args.methods_defaulted else methods
     vehicle = load_full_vehicle(args.vehicle) if args.vehicle else FULL_PRESETS[args.vehicle_preset]
     if args.suite == "acceptance":
         cases = acceptance_cases(vehicle)
+    elif args.suite == "mismatch":
+        cases = mismatch_cases(vehicle)
     else:
         road = RoadSpec(kind=args.road, road_class=args.road_class, amplitudes=args.amplitudes,
                         laplace_nu=args.laplace_nu, waviness=args.waviness)
         sim = SimConfig(model="full", full_vehicle=vehicle, road=road, speed_kmh=args.speed_kmh,
-                        duration_s=args.duration_s, rate_hz=args.rate_hz)
-        cases = [FullCase("as given", FullTrialSpec(sim=sim, noise_fraction=args.noise))]
+                        duration_s=args.duration_s, rate_hz=args.rate_hz,
+                        departures=Departures(**departure_values(args)))
+        told = told_vehicle(vehicle, vehicle_error_values(args))
+        cases = [FullCase("as given", FullTrialSpec(sim=sim, noise_fraction=args.noise, told=told))]
     seeds = parse_seeds(args.seeds)
     progress = not args.quiet and sys.stderr.isatty()
     for k, case in enumerate(cases):

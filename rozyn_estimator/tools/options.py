@@ -38,7 +38,7 @@ def add_departure_options(p: argparse.ArgumentParser) -> None:
                              "estimator is not told)")
     g.add_argument("--damper-ratio", type=float, default=1.0, metavar="R",
                    help="dampers R times stiffer in rebound (the suspension extending) than in compression, "
-                        "at the vehicle's mean damping (c_r + c_c)/2 (default: 1, linear)")
+                        "at the vehicle's mean damping (c_r + c_c)/2, at every corner (default: 1, linear)")
     g.add_argument("--spring-progression", type=float, default=0.0, metavar="P",
                    help="progressive springs F = k e (1 + P (e/E)^2), e the deflection from the ride "
                         "height [m]: the force P x 100 %% above the linear spring's at e = E "
@@ -47,9 +47,14 @@ def add_departure_options(p: argparse.ArgumentParser) -> None:
                    help="E of --spring-progression [m] (default: 0.05)")
     g.add_argument("--gain-error", type=float, nargs=2, default=(0.0, 0.0), metavar=("FRONT", "REAR"),
                    help="accelerometer scale factor errors, shares: 0.03 reads 3 %% high (default: 0 0)")
+    g.add_argument("--corner-gain-errors", type=float, nargs=4, default=(0.0,) * 4,
+                   metavar=("FL", "FR", "RL", "RR"),
+                   help="--model full: each accelerometer's own scale factor error, added to its axle's "
+                        "--gain-error (default: 0 0 0 0)")
     g.add_argument("--time-offset-s", type=float, default=0.0, metavar="TAU",
-                   help="the rear accelerometer is TAU s late: its sample stamped t holds the specific "
-                        "force at t - TAU; negative: the front one is late (default: 0)")
+                   help="the rear accelerometer (--model full: both rear ones) is TAU s late: its sample "
+                        "stamped t holds the specific force at t - TAU; negative: the front one is late "
+                        "(default: 0)")
     g.add_argument("--lowpass-hz", type=float, default=0.0, metavar="F",
                    help="a 2nd-order Butterworth low-pass at F Hz in both accelerometers (default: 0, none)")
 
@@ -75,7 +80,7 @@ def departure_values(args: argparse.Namespace) -> dict[str, Any]:
         "damper_ratio": args.damper_ratio, "spring_progression": args.spring_progression,
         "spring_reference_m": args.spring_reference_m, "gain_error_front": args.gain_error[0],
         "gain_error_rear": args.gain_error[1], "time_offset_s": args.time_offset_s,
-        "lowpass_hz": args.lowpass_hz,
+        "lowpass_hz": args.lowpass_hz, "corner_gain_errors": tuple(args.corner_gain_errors),
     }
 
 

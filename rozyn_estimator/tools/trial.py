@@ -35,6 +35,12 @@ VEHICLE_ERRORS: dict[str, tuple[str, str]] = {
     "tyre_damping_error": ("tyre_damping_front_nspm", "tyre_damping_rear_nspm"),
     "unsprung_mass_error": ("unsprung_mass_front_kg", "unsprung_mass_rear_kg"),
 }
+# the same errors on the full car's per-corner values (FullVehicle's fields), all four corners
+FULL_VEHICLE_ERRORS: dict[str, str] = {
+    "stiffness_error": "suspension_stiffness_npm", "damping_error": "suspension_damping_nspm",
+    "tyre_stiffness_error": "tyre_stiffness_npm", "tyre_damping_error": "tyre_damping_nspm",
+    "unsprung_mass_error": "unsprung_mass_kg",
+}
 
 
 def _told(what: str) -> str:

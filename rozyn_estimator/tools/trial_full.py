@@ -22,9 +22,10 @@ import numpy as np
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS, PipelineConfig
 from rozyn_estimator.method.full import FULL_PARAM_NAMES, FullEstimate, estimate_full
-from rozyn_estimator.tools.options import departures_given
-from rozyn_estimator.tools.trial import parallel_map, parse_seeds
+from rozyn_estimator.tools.options import departure_values, vehicle_error_values
+from rozyn_estimator.tools.trial import FULL_VEHICLE_ERRORS, parallel_map, parse_seeds
 from rozyn_estimator.vehicle_full import FullVehicle, load_full_vehicle
+from sim_node.departures import Departures
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation
 
@@ -43,12 +44,19 @@ class FullTrialSpec:
     noise_fraction: float = 0.0  # white sensor noise, share of each channel's rms
     method: str = "likelihood"
     pipeline: PipelineConfig | None = None  # overrides the method's settings (rozyn study's)
+    told: FullVehicle | None = None  # the vehicle the estimator is told (None: the simulated one)
 
     @property
-    def vehicle(self) -> FullVehicle:
+    def plant(self) -> FullVehicle:
+        """The simulated vehicle (the truth)."""
         v = self.sim.plant_vehicle
         assert isinstance(v, FullVehicle)
         return v
+
+    @property
+    def vehicle(self) -> FullVehicle:
+        """The vehicle the estimator is told."""
+        return self.told if self.told is not None else self.plant
 
     def pipeline_config(self) -> PipelineConfig:
         """The estimator's settings: ``pipeline``, else the method's."""
@@ -56,7 +64,7 @@ class FullTrialSpec:
 
     @property
     def truth(self) -> np.ndarray:
-        v = self.vehicle
+        v = self.plant
         return np.array([v.sprung_mass_kg, v.roll_inertia_kgm2, v.pitch_inertia_kgm2, v.cog_from_front_axle_m,
                          v.cog_lateral_m])
 
@@ -80,18 +88,29 @@ def spec_from_args(args: argparse.Namespace) -> FullTrialSpec:
     """The full-car trial the ``rozyn trial`` options describe (refusing what it cannot do)."""
     if args.method not in METHODS_FULL:
         raise ConfigError(f"method: the full car has {', '.join(METHODS_FULL)}; got {args.method!r}")
-    given = departures_given(args)
-    if given:
-        raise ConfigError(f"{', '.join(given)}: not available with --model full (the half car's departures "
-                          "of the vehicle and its sensors from the estimator's model)")
     vehicle = load_full_vehicle(args.vehicle) if args.vehicle else FullVehicle()
     if args.road == "free-decay":
         raise ConfigError("road: --model full drives over ISO 8608 or Laplace roads (free decay: the tests)")
     road = RoadSpec(kind=args.road, road_class=args.road_class, amplitudes=args.amplitudes,
                     laplace_nu=args.laplace_nu, waviness=args.waviness)
     sim = SimConfig(model="full", full_vehicle=vehicle, road=road, speed_kmh=args.speed_kmh,
-                    rate_hz=args.rate_hz, noise_std_mps2=args.noise_std_mps2, duration_s=args.duration_s)
-    return FullTrialSpec(sim=sim, noise_fraction=args.noise_fraction, method=args.method)
+                    rate_hz=args.rate_hz, noise_std_mps2=args.noise_std_mps2, duration_s=args.duration_s,
+                    departures=Departures(**departure_values(args)))
+    return FullTrialSpec(sim=sim, noise_fraction=args.noise_fraction, method=args.method,
+                         told=told_vehicle(vehicle, vehicle_error_values(args)))
+
+
+def told_vehicle(vehicle: FullVehicle, errors: dict[str, float]) -> FullVehicle | None:
+    """``vehicle`` with each ``errors`` share (the ``--*-error`` options) on its per-corner values,
+    as the estimator is told it; None when every error is zero."""
+    changes: dict[str, Any] = {}
+    for key, error in errors.items():
+        if error != 0.0:
+            if not -1.0 < error < 10.0:
+                raise ConfigError(f"{key}: must lie in (-1, 10), got {error!r}")
+            field = FULL_VEHICLE_ERRORS[key]
+            changes[field] = tuple(x * (1.0 + error) for x in getattr(vehicle, field))
+    return dataclasses.replace(vehicle, **changes) if changes else None
 
 
 def simulate_full(spec: FullTrialSpec, seed: int) -> tuple[np.ndarray, np.ndarray, tuple[str, ...], float]:

@@ -36,7 +36,7 @@ from typing import Any
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS
-from rozyn_estimator.tools.compare_full import FULL_PRESETS
+from rozyn_estimator.tools.full_suites import FULL_PRESETS
 from rozyn_estimator.tools.study.directory import (
     check_model,
     check_same_study,
