@@ -1,5 +1,5 @@
 """``rozyn compare --model full``: the full car's methods side by side, its summaries and its
-acceptance suite (the 100-seed run is slow-marked)."""
+acceptance and mismatch suites (the 100-seed runs are slow-marked)."""
 
 from __future__ import annotations
 
@@ -10,13 +10,8 @@ import pytest
 
 from rozyn_estimator.method.full import FULL_PARAM_NAMES, FullEstimate
 from rozyn_estimator.tools.cli import main
-from rozyn_estimator.tools.compare_full import (
-    FULL_PRESETS,
-    FullBars,
-    acceptance_cases,
-    compare_full,
-    summarise_full,
-)
+from rozyn_estimator.tools.compare_full import compare_full, summarise_full
+from rozyn_estimator.tools.full_suites import FULL_PRESETS, FullBars, acceptance_cases, mismatch_cases
 
 TRUTH = np.array([1000.0, 400.0, 2000.0, 1.2, 0.0])
 
@@ -95,3 +90,37 @@ def test_acceptance_100_seeds(preset):
         if s.missed(case.bars):
             missed[case.label] = s.missed(case.bars)
     assert not missed, missed
+
+
+def test_the_mismatch_suite_departs_as_it_says():
+    cases = mismatch_cases(FULL_PRESETS["table5-1"])
+    assert len(cases) == 9 and all(c.bars is not None and c.bars.coverage[0] == 0.90 for c in cases)
+    gains = cases[1].spec
+    assert gains.sim.departures.corner_gains == (1.03, 0.98, 1.0, 1.02) and gains.told is None
+    tyres = cases[3].spec
+    assert tyres.told is not None and tyres.told.tyre_stiffness_npm[0] == pytest.approx(1e5 / 0.9)
+    assert tyres.plant.tyre_stiffness_npm[0] == 1e5 and tyres.vehicle is tyres.told
+    tolerances = tyres.plant.tolerances
+    assert not tolerances.sensor_gain_front and tolerances.tyre_stiffness_rear_npm == 0.1
+
+
+def test_a_departure_moves_the_estimate_and_the_uncertainty_covers_it():
+    """Four seeds of the suite's gain case: each estimate within 2.5 published std of the truth."""
+    case = mismatch_cases(FULL_PRESETS["table5-1"])[1]
+    results = compare_full(case.spec, ["likelihood"], range(1, 5), jobs=1)["likelihood"]
+    for est in results:
+        assert est.ok
+        assert np.all(np.abs(est.params - case.spec.truth) <= 2.5 * est.std)
+
+
+@pytest.mark.slow
+def test_mismatch_100_seeds_covers_the_truth():
+    """The full car departing from its model: every case's 95 % coverage at least 90 % (the
+    published std honest; ``rozyn compare --model full --suite mismatch`` prints the width bars too)."""
+    low = {}
+    for case in mismatch_cases(FULL_PRESETS["table5-1"]):
+        results = compare_full(case.spec, ["likelihood"], range(1, 101))["likelihood"]
+        s = summarise_full(results, case.spec.truth)
+        if s.failures or np.any(s.coverage_95 < 0.90):
+            low[case.label] = (s.failures, s.coverage_95.tolist())
+    assert not low, low
