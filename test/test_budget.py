@@ -143,7 +143,7 @@ def test_a_model_fit_check_whose_statistic_is_not_a_number_gives_no_verdict(clea
     a NaN's p-value is never below the threshold, which would otherwise read as "fits"."""
     from rozyn_estimator.method.likelihood import fitcheck
 
-    monkeypatch.setattr(fitcheck, "_neighbour_correlation", lambda window_dft: math.nan)
+    monkeypatch.setattr(fitcheck, "neighbour_correlation", lambda window_dft: math.nan)
     fit = refine(clean, 100.0, EXACT, START, SPEED).model_fit
     assert fit is not None and not fit.ok and fit.verdict == fitcheck.NOT_COMPUTABLE
     assert fit.to_dict()["statistic"] is None

@@ -53,6 +53,7 @@ import numpy as np
 from scipy.optimize import OptimizeResult
 
 from rozyn_estimator.method.full.calibrate import SensorCalibration, calibrate_sensors, sensor_groups
+from rozyn_estimator.method.full.fitcheck import full_model_fit
 from rozyn_estimator.method.full.intermittency import variance_factors
 from rozyn_estimator.method.full.refine_budget import refinement_contributions
 from rozyn_estimator.method.full.score import sandwich_ratio
@@ -60,6 +61,7 @@ from rozyn_estimator.method.full.spectrum import BODY_NAMES, FullCarSpectrum, ex
 from rozyn_estimator.method.full.whittle import FullWhittle, ridged, scoring
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.covariance import NOISE_AT_ZERO
+from rozyn_estimator.method.likelihood.fitcheck import ModelFit, neighbour_correlation
 from rozyn_estimator.method.likelihood.score import SandwichRatio
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, taper_window, window_spectra
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
@@ -96,6 +98,7 @@ class FullRefinement:
     variance_factors: tuple[float, ...] = ()  # the non-stationary road's factors on the model's variances
     sandwich: SandwichRatio | None = None  # the taper's sandwich over the model's std (.score), where taken
     calibration: SensorCalibration | None = None  # the sensors as the data calibrated them (.calibrate)
+    model_fit: ModelFit | None = None  # the goodness-of-fit check (.fitcheck)
     elapsed_ms: float = 0.0
     notes: tuple[str, ...] = ()
 
@@ -113,6 +116,7 @@ class FullRefinement:
                 "variance_factors": list(self.variance_factors),
                 "calibration": [] if self.calibration is None else
                 [c.to_dict() for c in self.calibration.calibrations],
+                "model_fit": None if self.model_fit is None else self.model_fit.to_dict(),
                 "elapsed_ms": self.elapsed_ms, "notes": list(self.notes)}
 
 
@@ -271,7 +275,9 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         noise_std_mps2=tuple(np.sqrt(np.exp(theta[model.noise_slice]) * fs).tolist()),
         waviness=float(theta[k["waviness"]]), coherence_scale=float(np.exp(theta[k["ln_coherence_scale"]])),
         contributions=contributions, budget_theta=budget_theta, variance_factors=tuple(factors.tolist()),
-        sandwich=sandwich, calibration=calibration, notes=tuple(notes))
+        sandwich=sandwich, calibration=calibration, notes=tuple(notes),
+        model_fit=None if share.max() < NOISE_AT_ZERO else  # noise-free sensors: S singular, no check
+        full_model_fit(objective, theta, freq, neighbour_correlation(spectra.window_dft)))
 
 
 def _contributions(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndarray, vehicle: FullVehicle,

@@ -159,9 +159,12 @@ def _refined(
     if ref.ok and ref.params is not None and ref.covariance is not None:
         calibrated = () if ref.calibration is None else ref.calibration.calibrations
         budget = FullBudget(ref.covariance, ref.contributions, calibrated) if vehicle.tolerances.any else None
+        fit = ref.model_fit
+        check = () if fit is None or fit.ok else (f"model check: {fit.verdict}",)
         return FullEstimate(status="ok", params=ref.params,
                             covariance=ref.covariance if budget is None else budget.total, modes=quick.modes,
-                            sensors=tuple(sensors), n_samples=quick.n_samples, notes=ref.notes + quick.notes,
+                            sensors=tuple(sensors), n_samples=quick.n_samples,
+                            notes=check + ref.notes + quick.notes,
                             budget=budget, stage="likelihood", rozyn=quick, refinement=ref,
                             elapsed_ms=(time.perf_counter() - started) * 1e3)
     rozyn = estimate_full(accel_mps2, fs_hz, vehicle, rozyn_cfg, speed_mps, sensors)

@@ -110,6 +110,15 @@ class FullWhittle:
         self._state, self._value = (S, dS, linv), (self._nll(linv) + penalty, grad + self.precision * theta)
         return self._value
 
+    def whitened_periodogram(self, theta: np.ndarray) -> np.ndarray | None:
+        """``L⁻¹ I Lᴴ⁻¹`` at θ per frequency (the identity's expectation under the model; the
+        model-fit check's), None where S is not positive definite."""
+        self.evaluate(theta)
+        if self._state is None:
+            return None
+        linv = self._state[2]
+        return linv @ self.periodogram @ _h(linv)
+
     def fun(self, theta: np.ndarray) -> float:
         return self.evaluate(theta)[0]
 

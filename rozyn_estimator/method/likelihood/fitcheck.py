@@ -87,7 +87,7 @@ def model_fit(objective: WhittleObjective, theta: np.ndarray, n_free: int,
     if not np.all(np.isfinite(w)):  # S singular somewhere: no whitening, no statistic (never "fits")
         return ModelFit(math.nan, dof, math.nan, (float(f[0]), float(f[-1])), NOT_COMPUTABLE)
     edges = np.geomspace(f[0], f[-1] * (1 + 1e-9), N_BANDS + 1)
-    kappa = _neighbour_correlation(spectra.window_dft)
+    kappa = neighbour_correlation(spectra.window_dft)
     # f ascending: each band's bins are a run (never empty: the fit needs 50 bins or more)
     starts = np.searchsorted(f, edges[:-1])
     counts = np.diff(np.r_[starts, f.size])
@@ -132,7 +132,7 @@ def _verdict(p: float, band: tuple[float, float], per_band: list[float], cross_s
     return "; ".join(causes) if causes else FITS
 
 
-def _neighbour_correlation(window_dft: np.ndarray) -> float:
+def neighbour_correlation(window_dft: np.ndarray) -> float:
     """κ = Σ_δ ρ_δ²: how many ordinates one independent one is worth under the taper."""
     w = window_dft / math.sqrt(float(np.sum(np.abs(window_dft) ** 2)))
     return float(np.sum(np.abs(np.correlate(w, w, "full")) ** 2))  # every lag δ, both signs
