@@ -81,6 +81,16 @@ def test_corner_gains_are_refused_for_the_half_car(capsys):
     assert "corner_gain_errors" in capsys.readouterr().err
 
 
+def test_the_table_names_the_departures_and_the_model_check(capsys):
+    assert main(["trial", "--model", "full", "--duration-s", "60", "--noise-fraction", "0.1",
+                 "--damper-ratio", "2", "--corner-gain-errors", "0.03", "0", "0", "0",
+                 "--stiffness-error", "0.05"]) == 0
+    out = capsys.readouterr().out
+    assert "dampers 2x stiffer in rebound" in out and "+3 / +0 / +0 / +0 % (FL/FR/RL/RR)" in out
+    assert "estimator told wrong: stiffness +5 %" in out
+    assert "model check: the full-car model does not fit in 1 of 1" in out
+
+
 def test_the_table_names_the_five_parameters(capsys):
     assert main(["trial", "--model", "full", "--seeds", "3-4", "--jobs", "1", "--duration-s", "90"]) == 0
     out = capsys.readouterr().out

@@ -43,6 +43,27 @@ FULL_VEHICLE_ERRORS: dict[str, str] = {
 }
 
 
+def departure_lines(d: Departures, told_errors: dict[str, float], full_car: bool = False) -> list[str]:
+    """How a run departs from the estimator's model (``told_errors``: the ``*_error`` shares the
+    estimator is told), as report lines (none: it does not)."""
+    gains = d.corner_gains if full_car else d.gains
+    gain_text = f"{d.gain_error_front * 100:+g} % front, {d.gain_error_rear * 100:+g} % rear"
+    if full_car and gains is not None:
+        gain_text = " / ".join(f"{(g - 1) * 100:+g}" for g in gains) + " % (FL/FR/RL/RR)"
+    plant = [text for on, text in (
+        (d.damper_ratio != 1.0, f"dampers {d.damper_ratio:g}x stiffer in rebound than in compression"),
+        (d.spring_progression != 0.0, f"progressive springs, +{d.spring_progression * 100:g} % force at "
+                                      f"{d.spring_reference_m * 1e3:g} mm"),
+        (gains is not None, f"sensor gain errors {gain_text}"),
+        (d.time_offset_s != 0.0, f"rear sensor{'s' if full_car else ''} {d.time_offset_s * 1e3:+g} ms late"),
+        (d.lowpass_hz > 0.0, f"{d.lowpass_hz:g} Hz low-pass in every sensor"),
+    ) if on]
+    told = [f"{key.removesuffix('_error').replace('_', ' ')} {error * 100:+g} %"
+            for key, error in told_errors.items() if error != 0.0]
+    return ([f"simulated vehicle departs: {'; '.join(plant)}"] if plant else []) + \
+        ([f"estimator told wrong: {'; '.join(told)}"] if told else [])
+
+
 def _told(what: str) -> str:
     return f"the estimator is told the {what} * (1 + error), both axles; in (-1, 10)"
 

@@ -28,6 +28,7 @@ from rozyn_estimator.tools.trial import (
     VEHICLE_ERRORS,
     TrialResult,
     TrialSpec,
+    departure_lines,
     parallel_map,
     parse_seeds,
     run_trials,
@@ -165,20 +166,7 @@ def format_trials(spec: TrialSpec, results: Sequence[TrialResult]) -> str:
 
 def mismatch_lines(spec: TrialSpec) -> list[str]:
     """How the run departs from the estimator's model, as report lines (none: it does not)."""
-    d = spec.departures
-    plant = [text for on, text in (
-        (d.damper_ratio != 1.0, f"dampers {d.damper_ratio:g}x stiffer in rebound than in compression"),
-        (d.spring_progression != 0.0, f"progressive springs, +{d.spring_progression * 100:g} % force at "
-                                      f"{d.spring_reference_m * 1e3:g} mm"),
-        (d.gains is not None, f"sensor gain errors {d.gain_error_front * 100:+g} % front, "
-                              f"{d.gain_error_rear * 100:+g} % rear"),
-        (d.time_offset_s != 0.0, f"rear sensor {d.time_offset_s * 1e3:+g} ms late"),
-        (d.lowpass_hz > 0.0, f"{d.lowpass_hz:g} Hz low-pass in both sensors"),
-    ) if on]
-    told = [f"{key.removesuffix('_error').replace('_', ' ')} {getattr(spec, key) * 100:+g} %"
-            for key in VEHICLE_ERRORS if getattr(spec, key) != 0.0]
-    return ([f"simulated vehicle departs: {'; '.join(plant)}"] if plant else []) + \
-        ([f"estimator told wrong: {'; '.join(told)}"] if told else [])
+    return departure_lines(spec.departures, {key: getattr(spec, key) for key in VEHICLE_ERRORS})
 
 
 def _one_trial(r: TrialResult) -> list[str]:

@@ -23,7 +23,7 @@ from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS, PipelineConfig
 from rozyn_estimator.method.full import FULL_PARAM_NAMES, FullEstimate, estimate_full
 from rozyn_estimator.tools.options import departure_values, vehicle_error_values
-from rozyn_estimator.tools.trial import FULL_VEHICLE_ERRORS, parallel_map, parse_seeds
+from rozyn_estimator.tools.trial import FULL_VEHICLE_ERRORS, departure_lines, parallel_map, parse_seeds
 from rozyn_estimator.vehicle_full import FullVehicle, load_full_vehicle
 from sim_node.departures import Departures
 from sim_node.road import RoadSpec
@@ -100,6 +100,14 @@ def spec_from_args(args: argparse.Namespace) -> FullTrialSpec:
                          told=told_vehicle(vehicle, vehicle_error_values(args)))
 
 
+def told_errors(spec: FullTrialSpec) -> dict[str, float]:
+    """The ``*_error`` shares the estimator is told (of ``spec.told`` against the plant)."""
+    if spec.told is None:
+        return {}
+    return {key: getattr(spec.told, field)[0] / getattr(spec.plant, field)[0] - 1.0
+            for key, field in FULL_VEHICLE_ERRORS.items()}
+
+
 def told_vehicle(vehicle: FullVehicle, errors: dict[str, float]) -> FullVehicle | None:
     """``vehicle`` with each ``errors`` share (the ``--*-error`` options) on its per-corner values,
     as the estimator is told it; None when every error is zero."""
@@ -160,7 +168,8 @@ def format_full_trials(spec: FullTrialSpec, results: Sequence[FullTrialResult]) 
     s = spec.sim
     lines = [f"full car: {s.road.kind} class {s.road.road_class} ({s.road.amplitudes}), two tracks "
              f"({s.track_coherence} coherence), {s.speed_kmh:g} km/h, {s.duration_s:g} s at "
-             f"{s.rate_hz:g} Hz, {_METHOD_LABELS[spec.method]}, {len(results)} seed(s)", ""]
+             f"{s.rate_hz:g} Hz, {_METHOD_LABELS[spec.method]}, {len(results)} seed(s)",
+             *departure_lines(s.departures, told_errors(spec), full_car=True), ""]
     ok = [r for r in results if r.estimate.ok and r.estimate.params is not None]
     lines.append(f"{'parameter':<26}{'truth':>9}{'mean':>11}{'spread':>10}{'reported std':>14}")
     if ok:
@@ -172,6 +181,11 @@ def format_full_trials(spec: FullTrialSpec, results: Sequence[FullTrialResult]) 
                          f"{np.sqrt(np.mean(std[:, i] ** 2)):>14.4g}")
     lines += ["", f"failures: {len(results) - len(ok)} of {len(results)}"]
     lines += [f"  seed {r.seed}: {r.estimate.reason}" for r in results if not r.estimate.ok][:5]
+    fits = [r.estimate.refinement.model_fit for r in ok if r.estimate.refinement is not None
+            and r.estimate.refinement.model_fit is not None]
+    if fits:
+        lines.append(f"model check: the full-car model does not fit in {sum(not f.ok for f in fits)} of "
+                     f"{len(fits)} (median p = {np.median([f.p_value for f in fits]):.2g})")
     fallbacks = sum(1 for r in ok if r.estimate.refinement is not None and r.estimate.stage == "rozyn")
     if fallbacks:
         lines.append(f"refinement failed, Rozyn's estimate published: {fallbacks} of {len(results)}")
