@@ -156,8 +156,8 @@ def case_record(case: Case, results: dict[str, list[TrialResult]]) -> list[dict[
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", choices=("half", "full"), default="half",
                    help="half (default) or full: the 7-DOF full car on two road tracks (methods likelihood "
-                        "and rozyn; --suite acceptance: issue 13's cases; --vehicle a full-car file or "
-                        "--vehicle-preset table5-1 / second)")
+                        "and rozyn; --suite acceptance: issue 13's cases, mismatch: the full car off its "
+                        "model; --vehicle a full-car file or --vehicle-preset table5-1 / second)")
     p.add_argument("--suite", choices=SUITES,
                    help="run a named set of cases (overrides the road and sensor options)")
     p.add_argument("--methods", default=",".join(DEFAULT_METHODS),

@@ -6,7 +6,7 @@ method (``likelihood``, ``rozyn``) estimates from the very same samples. Per met
 parameter: mean, bias (per cent; the lateral CoG in millimetres), spread, the mean
 reported std, 95 % coverage, failures and the median time per estimate; with
 ``--suite acceptance`` each case's verdict against its bars. ``--vehicle-preset second``
-swaps in a second, clearly different full car; the suites are :mod:`.full_suites`'.
+swaps in a second, clearly different full car; the suites are :mod:`.full_suites`'s.
 """
 
 from __future__ import annotations

@@ -59,21 +59,6 @@ def add_departure_options(p: argparse.ArgumentParser) -> None:
                    help="a 2nd-order Butterworth low-pass at F Hz in both accelerometers (default: 0, none)")
 
 
-def departures_given(args: argparse.Namespace) -> list[str]:
-    """The options of :func:`add_departure_options` and :data:`VEHICLE_ERROR_OPTIONS` that
-    ``args`` sets away from their defaults (for a model that has no such departures)."""
-    probe = argparse.ArgumentParser(add_help=False)
-    add_departure_options(probe)
-    given = [f"--{name.replace('_', '-')}" for name, default in vars(probe.parse_args([])).items()
-             if _values(getattr(args, name, default)) != _values(default)]
-    return given + [option for option, (field, _) in VEHICLE_ERROR_OPTIONS.items()
-                    if getattr(args, field, 0.0) not in (0.0, None)]
-
-
-def _values(value: Any) -> tuple[Any, ...]:
-    return tuple(value) if isinstance(value, (list, tuple)) else (value,)
-
-
 def departure_values(args: argparse.Namespace) -> dict[str, Any]:
     """The ``Departures`` fields the options of :func:`add_departure_options` give."""
     return {
