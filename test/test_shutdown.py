@@ -206,8 +206,11 @@ def _nodes(tmp_path: Path, env: dict[str, str]) -> dict[str, subprocess.Popen[st
     """The three executables as a user starts them: sim on sim time, estimator, recorder."""
     config = ROOT / "config"
     commands = {
+        # two subscribers before the sim starts, as the launch file's record:=true: else the sim (20x
+        # real time) may feed the estimator to its first estimate before the recorder's subscription
+        # has matched the sim's publisher, and the bag holds no sample when the test stops the nodes
         "sim_node": ["--params-file", str(config / "sim.yaml"),
-                     "--params-file", str(config / "vehicle.yaml")],
+                     "--params-file", str(config / "vehicle.yaml"), "-p", "subscribers_per_topic:=2"],
         "estimator_node": ["--params-file", str(config / "vehicle.yaml"), "-p", "use_sim_time:=true",
                            "-p", "speed_topic:=sim/speed", "-p", "window_s:=20.0", "-p", "qos_depth:=10000"],
         "bag_recorder": ["-p", "use_sim_time:=true", "-p", f"output:={tmp_path / 'bag'}"],
