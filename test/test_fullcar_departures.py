@@ -7,6 +7,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from fullcar_helpers import ASYMMETRIC
 from scipy.integrate import solve_ivp
 
 from rozyn_estimator.errors import ConfigError
@@ -16,15 +17,7 @@ from sim_node.fullcar import FullCarPlant, body_rows, sensor_points, static_stat
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation
 
-# every coupling at work: lateral CoG, unequal corners, anti-roll bars, sensors off the axles
-CAR = FullVehicle(
-    cog_lateral_m=0.06, track_rear_m=1.56, unsprung_mass_kg=(21.0, 19.0, 34.0, 31.0),
-    tyre_stiffness_npm=(1.0e5, 1.1e5, 0.95e5, 1.05e5), tyre_damping_nspm=(20.0, 30.0, 25.0, 40.0),
-    suspension_stiffness_npm=(22e3, 24e3, 41e3, 38e3),
-    suspension_damping_nspm=(1300.0, 1500.0, 1800.0, 1700.0),
-    anti_roll_stiffness_front_nmprad=15_000.0, anti_roll_stiffness_rear_nmprad=6000.0,
-    sensor_x_m=(0.2, 0.1, 2.6, 2.9), sensor_y_m=(0.6, -0.5, 0.7, -0.65),
-)
+CAR = ASYMMETRIC  # every coupling at work: lateral CoG, unequal corners, bars, sensors off the axles
 GAUSSIAN = RoadSpec(amplitudes="gaussian")
 
 
