@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.method.full import FullEstimate, estimate_full
-from rozyn_estimator.method.full.calibrate import SensorCalibration, sensor_groups
+from rozyn_estimator.method.full.calibrate import VehicleCalibration, sensor_groups
+from rozyn_estimator.method.full.corners import CornerCalibrating, corner_keys
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.likelihood.calibration import Calibration
 from rozyn_estimator.method.pipeline import PipelineConfig
@@ -90,6 +91,9 @@ def test_quiet_sensors_publish_what_the_data_know(quiet_drive: np.ndarray) -> No
     err, std, est = _fit(quiet_drive, CALIBRATING)
     _, first_std, _ = _fit(quiet_drive, FIRST_ORDER)
     assert std[1] < 0.85 * first_std[1] and std[4] < 0.2 * first_std[4]
+    # the corner values calibrated too: the mass's std halves (what is left is the scale the data
+    # cannot see: body and corners alike), the CoG's l_f a ninth of the first-order budget's
+    assert std[0] < 0.7 * first_std[0] and std[3] < 0.3 * first_std[3]
     assert np.all(np.abs(err) < 2.0 * std)
     assert est.budget is not None
     sensors = [c for name, c in est.budget.contributions.items() if name.startswith("sensor")]
@@ -134,10 +138,53 @@ def test_a_warm_update_takes_the_calibration_over_and_refreshes_it(quiet_drive: 
 def test_a_value_far_beyond_its_tolerance_is_noted() -> None:
     far = Calibration("sensor_gain_front_left", 0.09, 0.004, 0.02)
     near = Calibration("sensor_y_front_right_m", 0.004, 0.002, 0.01)
-    cal = SensorCalibration(("gain", "y"), np.zeros(13), (far, near), {}, np.zeros(5))
+    cal = VehicleCalibration(("gain", "y"), np.zeros(13), (far, near), {}, np.zeros(5))
     notes = cal.departures()
     assert len(notes) == 1 and "sensor_gain_front_left" in notes[0] and "+9" in notes[0]
     moved = np.zeros(14)
     assert cal.holds(moved) and not cal.holds(moved + 0.02)
     assert not dataclasses.replace(cal, age=10).holds(moved)
     assert not dataclasses.replace(cal, converged=False).holds(moved)
+
+
+def test_derivatives_by_the_corner_values_match_differences() -> None:
+    """The corner values' shares on a model that calibrates sensors too (their gains off: the
+    corner derivatives must see θ's calibrated sensing)."""
+    model, theta = _model(calibrate=("gain",))
+    theta[model.calibration_slice] = np.random.default_rng(3).normal(0.0, 0.03, 4)
+    keys = corner_keys(CAR)
+    assert len(keys) == 10  # springs, dampers, tyres, tyre damping, unsprung masses per axle (no bars)
+    calibrating = CornerCalibrating(model, CAR, keys)
+    th = np.r_[theta, np.random.default_rng(4).normal(0.0, 0.1, len(keys))]
+    S, dS = calibrating.node_spectrum(th)
+    assert dS is not None and np.all(np.isfinite(S)) and dS.shape[0] == calibrating.n_params
+    for i in range(model.n_params - 4, calibrating.n_params):
+        up, down = th.copy(), th.copy()
+        up[i] += 1e-6
+        down[i] -= 1e-6
+        diff = (calibrating.node_spectrum(up, False)[0] - calibrating.node_spectrum(down, False)[0]) / 2e-6
+        assert np.abs(diff - dS[i]).max() <= 1e-5 * np.abs(dS[i]).max(), calibrating.names[i]
+    # the body and every corner value scaled alike leave S as it is: the data cannot tell the
+    # scale, only the tolerances bound it (the published mass std is theirs)
+    scaled = th.copy()
+    scaled[:3] += np.log1p(0.01)  # m, I_xx, I_yy 1 % more, and so every corner value
+    scaled[model.n_params:] = 1.01 * (1.0 + th[model.n_params:]) - 1.0
+    S2, _ = calibrating.node_spectrum(scaled, False)
+    assert np.abs(S2 - S).max() < 1e-9 * np.abs(S).max()
+
+
+def test_a_corner_value_off_by_its_tolerance_is_calibrated() -> None:
+    """The front tyres 10 % softer than the file says (their tolerance): calibrated, the data move
+    the tyres' share toward the truth and the estimate stays within its std (here the model
+    check still warns, so the corners' first-order budget stands in the covariance)."""
+    plant = dataclasses.replace(CAR, tyre_stiffness_npm=(90_000.0, 90_000.0, 100_000.0, 100_000.0))
+    sim = SimConfig(model="full", full_vehicle=plant, road=RoadSpec(), speed_kmh=100.0, seed=2,
+                    noise_std_mps2=0.02)
+    y = Simulation(sim).run(120.0).accel_mps2
+    err, std, est = _fit(y, CALIBRATING)
+    assert np.all(np.abs(err) < 3.0 * std), (err, std)
+    assert est.budget is not None
+    tyre = next(c for c in est.budget.calibration if c.name == "tyre_stiffness_front_npm")
+    assert tyre.estimate < -0.05 and tyre.identified, tyre
+    assert est.refinement is not None and est.refinement.calibration is not None
+    assert est.refinement.calibration.vehicle(CAR).tyre_stiffness_npm[0] < 95_000.0

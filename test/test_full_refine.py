@@ -104,15 +104,18 @@ def test_three_sensors_and_an_asymmetric_car():
 
 
 def test_the_budget_predicts_what_a_wrong_assumed_value_does():
-    """The front springs 5 % stiffer than the vehicle file says, its tolerance 5 %: the
-    estimate moves by the contribution the budget published (first order; opposite sign:
-    the contribution is the assumed value moved by +1 tolerance)."""
+    """The front springs 5 % stiffer than the vehicle file says, its tolerance 5 %: without the
+    corners' calibration (``self_calibrate: false``) the estimate moves by the contribution the
+    first-order budget published (opposite sign: the contribution is the assumed value moved by
+    +1 tolerance)."""
     plant = dataclasses.replace(EXACT, suspension_stiffness_npm=(23_625.0, 23_625.0, 40_000.0, 40_000.0))
     assumed = dataclasses.replace(FullVehicle(), tolerances=FullTolerances.from_mapping(
         {"suspension_stiffness_front_npm": 0.05}))
     y = _run(plant, seed=8)
-    wrong = estimate_full(y, 100.0, assumed, PipelineConfig(), SPEED_MPS)
-    right = estimate_full(y, 100.0, plant, PipelineConfig(), SPEED_MPS)
+    cfg = PipelineConfig()
+    cfg = dataclasses.replace(cfg, likelihood=dataclasses.replace(cfg.likelihood, self_calibrate=False))
+    wrong = estimate_full(y, 100.0, assumed, cfg, SPEED_MPS)
+    right = estimate_full(y, 100.0, plant, cfg, SPEED_MPS)
     assert wrong.refinement is not None and wrong.budget is not None
     contribution = wrong.refinement.contributions["suspension_stiffness_front_npm"]
     shift = wrong.params - right.params

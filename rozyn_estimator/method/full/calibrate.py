@@ -1,6 +1,7 @@
-"""The full car's sensors calibrated by the data: each sensor's gain and position and the rear
-sensors' delay, nuisances of the augmented posterior with their tolerances as Gaussian priors
-(:func:`calibrate_sensors`; the half car's :mod:`rozyn_estimator.method.likelihood.augment`).
+"""The full car's sensors and corner values calibrated by the data: each sensor's gain and
+position, the rear sensors' delay and each axle's corner values (:mod:`.corners`), nuisances
+of the augmented posterior with their tolerances as Gaussian priors (:func:`calibrate_vehicle`;
+the half car's :mod:`rozyn_estimator.method.likelihood.augment`).
 
 Why not the first-order budget alone (:mod:`.refine_budget`): four sensors on one rigid body
 measure its three motions, and their one redundant combination shows what the assumed sensing
@@ -13,7 +14,8 @@ priors, the values the data pin down are corrected and the rest keep their toler
 
 From the fit's optimum (the new values at the model's assumed ones) one scoring step of the
 posterior when no value moves by more than ``_FAR`` posterior std (the one-step estimator),
-else the fit's trust-region optimiser to the mode. The model then assumes the calibrated
+else the fit's trust-region optimiser to the mode; with corner values also when the step
+leaves the posterior short of its mode (they act on S nonlinearly). The model then assumes the calibrated
 sensors (:class:`SensorCalibration`'s ``values``); what their remaining uncertainty adds to
 the estimate is the augmented inverse information's θ block beyond the fit's own,
 ``A (F_ββ + P - F_βθ A)⁻¹ Aᵀ`` with ``A = F⁻¹ F_θβ``, split per value by the symmetric square
@@ -25,11 +27,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from rozyn_estimator.method.full import sensing
+from rozyn_estimator.method.full import corners, sensing
+from rozyn_estimator.method.full.corners import CornerCalibrating
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.full.whittle import FullWhittle, ridged, scoring
 from rozyn_estimator.method.likelihood.augment import backtracked
@@ -49,38 +52,50 @@ TOLERANCE_KEYS = {"gain": ("sensor_gain_front", "sensor_gain_rear"),
 
 
 @dataclass(frozen=True)
-class SensorCalibration:
-    """The sensors as the data calibrated them (departures from the vehicle file's)."""
+class VehicleCalibration:
+    """The sensors and corner values as the data calibrated them (departures from the vehicle
+    file's)."""
 
-    groups: tuple[str, ...]  # the calibrated groups (:data:`.sensing.GROUPS`)
-    values: np.ndarray  # the departures, every group's (:func:`.sensing.parameter_names`; 0 if not fitted)
+    groups: tuple[str, ...]  # the calibrated sensor groups (:data:`.sensing.GROUPS`)
+    values: np.ndarray  # the sensors' departures, all groups' (:func:`.sensing.parameter_names`; 0: not fit)
     calibrations: tuple[Calibration, ...]  # each calibrated value: estimate, posterior std, tolerance
     contributions: dict[str, np.ndarray]  # what each value's remaining uncertainty adds to (5,)
     body: np.ndarray  # θ's body parameters (ln m, ln I_xx, ln I_yy, logit l_f, y_c [m]) it was taken at
     converged: bool = True  # False: the optimiser stopped at its iteration limit
     age: int = 0  # the later windows that took it over
+    corner_keys: tuple[str, ...] = ()  # the calibrated corner values' tolerance keys (:mod:`.corners`)
+    corner_shares: np.ndarray = field(default_factory=lambda: np.zeros(0))  # their departures (shares)
 
     def holds(self, theta: np.ndarray) -> bool:
         """A warm update may take it over (values and contributions): the body's parameters
         moved by less than ``_KEEP_MOVE`` since, and it is younger than ``_KEEP_UPDATES``
-        windows (the sensors do not change; the later windows' data refresh it)."""
+        windows (the vehicle does not change; the later windows' data refresh it)."""
         return self.converged and self.age < _KEEP_UPDATES and \
             float(np.max(np.abs(theta[:5] - self.body))) < _KEEP_MOVE
 
     def departures(self) -> list[str]:
         """Notes on the values the data put further from the vehicle file's than ``_DEPARTED``
         tolerances (and posterior std): the file, or the sensor, is off."""
-        return [f"sensor calibration: {c.name} {c.text()}: beyond its tolerance, check the vehicle file"
+        return [f"{'sensor' if c.name.startswith('sensor') else 'corner'} calibration: {c.name} {c.text()}: "
+                "beyond its tolerance, check the vehicle file"
                 for c in self.calibrations if abs(c.estimate) > _DEPARTED * max(c.tolerance, c.std)]
 
-    def aged(self) -> SensorCalibration:
+    def aged(self) -> VehicleCalibration:
         """The same, taken over by one more window."""
         return dataclasses.replace(self, age=self.age + 1)
+
+    def same_plan(self, groups: tuple[str, ...], corner_keys: tuple[str, ...]) -> bool:
+        """It calibrated these sensor groups and corner values (a window may start from it)."""
+        return self.groups == groups and self.corner_keys == corner_keys
+
+    def vehicle(self, file_vehicle: FullVehicle) -> FullVehicle:
+        """The vehicle file's with the calibrated corner values."""
+        return corners.moved(file_vehicle, self.corner_keys, self.corner_shares)
 
     @property
     def tolerance_keys(self) -> set[str]:
         """The vehicle's tolerance keys the calibration stands for."""
-        return {key for g in self.groups for key in TOLERANCE_KEYS[g]}
+        return {key for g in self.groups for key in TOLERANCE_KEYS[g]} | set(self.corner_keys)
 
 
 def sensor_groups(vehicle: FullVehicle, sensors: tuple[int, ...]) -> tuple[str, ...]:
@@ -91,48 +106,59 @@ def sensor_groups(vehicle: FullVehicle, sensors: tuple[int, ...]) -> tuple[str, 
                  and (g != "delay" or both_axles))
 
 
-def calibrate_sensors(
+def calibrate_vehicle(
     objective: FullWhittle, theta: np.ndarray, vehicle: FullVehicle, groups: tuple[str, ...],
-    start: np.ndarray | None = None, max_iter: int = 100,
-) -> tuple[np.ndarray, SensorCalibration]:
+    start: VehicleCalibration | None = None, max_iter: int = 100, corner_keys: tuple[str, ...] = (),
+) -> tuple[np.ndarray, VehicleCalibration]:
     """(the fit's θ at the posterior's mode, the calibration) from the fit's optimum ``theta``
-    of ``objective`` (whose model assumes the sensors at ``start``, every group's values; None:
-    the vehicle's). Raises ValueError when the posterior is not finite there."""
+    of ``objective``, whose model assumes the values of ``start`` (None: the vehicle file's,
+    ``vehicle``). Raises ValueError when the posterior is not finite there."""
     base = objective.model
-    model = base.calibrating(groups)
+    sensor_model = base.calibrating(groups)
+    model = CornerCalibrating(sensor_model, vehicle, corner_keys) if corner_keys else sensor_model
     n, k = base.n_params, base.k
     names = model.names[model.calibration_slice]
     stds = _prior_stds(vehicle, base.sensors, names)
     precision = np.r_[np.zeros(n), 1.0 / stds**2]
-    posterior = FullWhittle(model, objective.periodogram, objective.counts, precision)
-    every = np.zeros(len(sensing.parameter_names(sensing.GROUPS, k))) if start is None else start
-    point = np.r_[theta, _pick(every, groups, k)]
+    posterior = FullWhittle(model, objective.periodogram, objective.counts, precision)  # type: ignore[arg-type]
+    every = np.zeros(len(sensing.parameter_names(sensing.GROUPS, k))) if start is None else start.values
+    shares = np.zeros(len(corner_keys)) if start is None else start.corner_shares
+    point = np.r_[theta, _pick(every, groups, k), shares]
     S_nodes, dS_fit = objective.evaluated(theta)  # the same S: only the new derivatives are computed
     posterior.seed(point, S_nodes, np.concatenate([dS_fit, model.calibration_derivatives(point)]))
     value, grad = posterior.evaluate(point)
     if not math.isfinite(value):
-        raise ValueError("the sensors' calibration: the posterior is not finite at the fit's optimum")
+        raise ValueError("the calibration: the posterior is not finite at the fit's optimum")
     info = _information(posterior, point)
     inv = np.linalg.inv(ridged(info) + np.diag(precision))
     step = -inv @ grad
     converged = True
-    if np.all(np.abs(step) <= _FAR * np.sqrt(np.abs(np.diag(inv)))):  # the one-step estimator: the
-        point = point + step  # information at its start stands for the mode's (as the half car's)
-    else:  # far off: the nuisances that absorbed the departure (a noise floor) must move back
-        found = scoring(posterior, backtracked(posterior.fun, point, step, value), _CONVERGED, max_iter)
+    near = bool(np.all(np.abs(step) <= _FAR * np.sqrt(np.abs(np.diag(inv)))))
+    if near:  # the one-step estimator: the information at its start stands for the mode's
+        point = point + step
+    if not near or (corner_keys and posterior.decrement(point) >= _CONVERGED):
+        # far off: the nuisances that absorbed the departure (a noise floor) must move back; or
+        # the corner values act on S too nonlinearly for one step (a tyre's damping moves by
+        # tens of %): scoring to the mode
+        found = scoring(posterior, point if near else backtracked(posterior.fun, point, step, value),
+                        _CONVERGED, max_iter)
         point, converged = found.x, bool(found.get("success")) or posterior.decrement(found.x) < _CONVERGED
         info = _information(posterior, point)
-    contributions, posterior_std = _contributions(info, posterior.model, point, precision[n:], base.sensors)
+    contributions, posterior_std = _contributions(info, model, point, precision[n:], base.sensors)
     fitted = point[n:]
     calibrations = tuple(Calibration(*_reported(name, base.sensors, float(x), float(sd), float(tol)))
                          for name, x, sd, tol in zip(names, fitted, posterior_std, stds, strict=True))
-    calibration = SensorCalibration(groups, _every(fitted, groups, k), calibrations, contributions,
-                                    point[:5].copy(), converged)
+    n_sensor = fitted.size - len(corner_keys)
+    calibration = VehicleCalibration(groups, _every(fitted[:n_sensor], groups, k), calibrations,
+                                     contributions, point[:5].copy(), converged, corner_keys=corner_keys,
+                                     corner_shares=fitted[n_sensor:].copy())
     return point[:n], calibration
 
 
-def _contributions(info: np.ndarray, model: FullCarSpectrum, point: np.ndarray, precision: np.ndarray,
-                   sensors: tuple[int, ...]) -> tuple[dict[str, np.ndarray], np.ndarray]:
+def _contributions(
+    info: np.ndarray, model: FullCarSpectrum | CornerCalibrating, point: np.ndarray, precision: np.ndarray,
+    sensors: tuple[int, ...],
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """(each calibrated value's contribution (5,) to the estimate, the values' posterior std)
     from the data's information ``info`` of the augmented ``model``: the module docstring's
     split of ``A M Aᵀ``, ``M`` the values' posterior covariance."""
@@ -157,7 +183,10 @@ def _information(posterior: FullWhittle, point: np.ndarray) -> np.ndarray:
 
 
 def _tolerance_key(name: str, sensors: tuple[int, ...]) -> tuple[str, int | None]:
-    """(the tolerance key, the sensor's corner; None for the delay) of a calibrated value."""
+    """(the tolerance key, the sensor's corner; None for the delay and a corner value) of a
+    calibrated value."""
+    if name.startswith(corners.NAME_PREFIX):
+        return name.removeprefix(corners.NAME_PREFIX), None
     if name == "delay_ms":
         return "sensor_time_offset_s", None
     kind, index = name.rsplit("_", 1)
@@ -170,8 +199,8 @@ def _tolerance_key(name: str, sensors: tuple[int, ...]) -> tuple[str, int | None
 def _prior_stds(vehicle: FullVehicle, sensors: tuple[int, ...], names: list[str]) -> np.ndarray:
     """Each calibrated value's tolerance in θ's units (a log gain: the share; m; ms)."""
     tol = vehicle.tolerances.to_dict()
-    out = [tol[key] / (sensing.DELAY_SCALE_S if corner is None else 1.0)
-           for key, corner in (_tolerance_key(name, sensors) for name in names)]
+    out = [tol[key] / (sensing.DELAY_SCALE_S if name == "delay_ms" else 1.0)
+           for name, (key, _) in ((name, _tolerance_key(name, sensors)) for name in names)]
     return np.maximum(np.array(out), _FIXED)
 
 
@@ -184,7 +213,10 @@ def _budget_name(name: str, sensors: tuple[int, ...]) -> str:
 def _reported(name: str, sensors: tuple[int, ...], value: float, std: float,
               tol: float) -> tuple[str, float, float, float]:
     """(name, estimate, std, tolerance) as :class:`Calibration` reports them (SI; the name's
-    unit suffix picks the display: a gain in %, a position in mm, the delay in ms)."""
+    unit suffix picks the display: a gain in %, a position in mm, the delay in ms; a corner
+    value: its tolerance key and share)."""
+    if name.startswith(corners.NAME_PREFIX):
+        return name.removeprefix(corners.NAME_PREFIX), value, std, tol
     if name == "delay_ms":
         s = sensing.DELAY_SCALE_S
         return "sensor_time_offset_s", value * s, std * s, tol * s

@@ -24,10 +24,12 @@ the best point of a coarse grid of heave, pitch and roll frequencies as well. Th
 wins (continued if it has not converged); a result that still explains a channel as
 mostly noise is refused.
 
-Sensors: where the vehicle's tolerances allow and ``self_calibrate`` is on, each sensor's
-gain and position and the rear sensors' delay are then calibrated (:mod:`.calibrate`: the
-augmented posterior's step; a warm update takes the previous window's over) and the model
+Sensors and corners: where the vehicle's tolerances allow and ``self_calibrate`` is on, each
+sensor's gain and position, the rear sensors' delay and each axle's springs, dampers, tyres
+and unsprung masses (and bars) are then calibrated (:mod:`.calibrate`, :mod:`.corners`: the
+augmented posterior's mode; a warm update takes the previous window's over) and the model
 assumes them from there on; a cold fit stops at ``tol_calibrated``, the step completes it.
+Where the model check fails, the corners' first-order budget stands in for their calibration's.
 
 Covariance: the sandwich ``F⁻¹ Cov(∇ℓ) F⁻¹`` of the inverse Fisher information (the
 nuisances' uncertainty included) with the score's covariance under the model, which holds
@@ -52,7 +54,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import OptimizeResult
 
-from rozyn_estimator.method.full.calibrate import SensorCalibration, calibrate_sensors, sensor_groups
+from rozyn_estimator.method.full.calibrate import VehicleCalibration, calibrate_vehicle, sensor_groups
+from rozyn_estimator.method.full.corners import corner_keys
 from rozyn_estimator.method.full.fitcheck import full_model_fit
 from rozyn_estimator.method.full.intermittency import variance_factors
 from rozyn_estimator.method.full.refine_budget import refinement_contributions
@@ -97,7 +100,7 @@ class FullRefinement:
     budget_theta: np.ndarray | None = None  # the body parameters θ[:5] the contributions were taken at
     variance_factors: tuple[float, ...] = ()  # the non-stationary road's factors on the model's variances
     sandwich: SandwichRatio | None = None  # the taper's sandwich over the model's std (.score), where taken
-    calibration: SensorCalibration | None = None  # the sensors as the data calibrated them (.calibrate)
+    calibration: VehicleCalibration | None = None  # the sensors and corners as the data calibrated them
     model_fit: ModelFit | None = None  # the goodness-of-fit check (.fitcheck)
     elapsed_ms: float = 0.0
     notes: tuple[str, ...] = ()
@@ -171,9 +174,11 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
                                          max(1, int(_GROUP_HZ * y.shape[0] / fs + 1e-9)))
     kernel = _kernel_m2(y.shape[0], fs, cfg.taper, counts)
     groups = sensor_groups(vehicle, sensors) if cfg.self_calibrate else ()
+    corners = corner_keys(vehicle) if cfg.self_calibrate else ()
     assumed = warm.calibration if warm is not None and warm.calibration is not None \
-        and warm.calibration.groups == groups else None  # the previous window's sensors
-    model = FullCarSpectrum(vehicle, sensors, freq, fs, v if v.size > 1 else float(v[0]),
+        and warm.calibration.same_plan(groups, corners) else None  # the previous window's values
+    assumed_vehicle = vehicle if assumed is None else assumed.vehicle(vehicle)
+    model = FullCarSpectrum(assumed_vehicle, sensors, freq, fs, v if v.size > 1 else float(v[0]),
                             cfg.aliases, f_ref_hz=math.sqrt(band[0] * band[1]),
                             road_shape_terms=cfg.road_shape_terms, min_noise_psd=_MIN_NOISE * power,
                             kernel_m2_hz2=kernel, road_max_cpm=cfg.road_max_cpm,
@@ -185,7 +190,8 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
 
     ahead = _coarse_fit(spectra, y.shape[0], model, cfg)
     # a calibration's step completes the fit (as the half car's: the estimates move by < 0.01 std)
-    fit_cfg = dataclasses.replace(cfg, tol=cfg.tol_calibrated) if groups and assumed is None else cfg
+    calibrating = bool(groups or corners)
+    fit_cfg = dataclasses.replace(cfg, tol=cfg.tol_calibrated) if calibrating and assumed is None else cfg
 
     def run(theta0: np.ndarray, max_iter: int, cold: bool = False) -> None:
         nonlocal best, iterations, starts
@@ -227,14 +233,15 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     theta, calibration, notes = best.x, None, []
     if assumed is not None and assumed.holds(theta):  # the model assumes its values already
         calibration = assumed.aged()
-    elif groups:
+    elif calibrating:
         try:
-            theta, calibration = calibrate_sensors(objective, theta, vehicle, groups,
-                                                   None if assumed is None else assumed.values, cfg.max_iter)
+            theta, calibration = calibrate_vehicle(objective, theta, vehicle, groups, assumed, cfg.max_iter,
+                                                   corners)
         except (ValueError, np.linalg.LinAlgError) as exc:  # the first-order budget stands for them
-            notes.append(f"sensor calibration failed ({exc}): the tolerances' first-order budget stands")
+            notes.append(f"calibration failed ({exc}): the tolerances' first-order budget stands")
         else:
             model.assume_sensors(calibration.values)
+            model.set_vehicle(calibration.vehicle(vehicle))
             objective = FullWhittle(model, periodogram, counts)
     notes += [] if calibration is None else calibration.departures()
     share = _noise_share(theta, model, power)
@@ -263,7 +270,12 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         raise _FitError("likelihood fit: covariance not positive")
     factors = variance_factors(objective, theta, combos, spectra, share, cfg.taper)
     cov = np.sqrt(factors)[:, None] * cov * np.sqrt(factors)[None, :]
-    contributions, budget_theta = _contributions(objective, theta, theta_cov, vehicle, warm, calibration)
+    fit = None if share.max() < NOISE_AT_ZERO else \
+        full_model_fit(objective, theta, freq, neighbour_correlation(spectra.window_dft))  # else S singular
+    # uncalibrated values move from the model's vehicle; a misfit's corner calibration absorbed
+    # structure (dampers stiffer in rebound moved l_f by 2 std): their first-order budget stands
+    contributions, budget_theta = _contributions(objective, theta, theta_cov, model.vehicle, warm,
+                                                 calibration, fit is not None and not fit.ok)
     # the calibration's step completes the fit's convergence (the half car's tol_calibrated)
     if objective.decrement(theta) >= (cfg.tol if calibration is None else cfg.tol_calibrated) or \
             (calibration is not None and not calibration.converged):
@@ -275,14 +287,13 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         noise_std_mps2=tuple(np.sqrt(np.exp(theta[model.noise_slice]) * fs).tolist()),
         waviness=float(theta[k["waviness"]]), coherence_scale=float(np.exp(theta[k["ln_coherence_scale"]])),
         contributions=contributions, budget_theta=budget_theta, variance_factors=tuple(factors.tolist()),
-        sandwich=sandwich, calibration=calibration, notes=tuple(notes),
-        model_fit=None if share.max() < NOISE_AT_ZERO else  # noise-free sensors: S singular, no check
-        full_model_fit(objective, theta, freq, neighbour_correlation(spectra.window_dft)))
+        sandwich=sandwich, calibration=calibration, notes=tuple(notes), model_fit=fit)
 
 
 def _contributions(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndarray, vehicle: FullVehicle,
                    warm: FullRefinement | None,
-                   calibration: SensorCalibration | None) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
+                   calibration: VehicleCalibration | None,
+                   misfit: bool = False) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
     """The tolerances' contributions and the θ they were taken at: the calibrated sensors'
     (:mod:`.calibrate`) and the first-order budget's of the other values, the previous window's
     when its body parameters were within ``_BUDGET_MOVE`` of these (the contributions are the
@@ -291,7 +302,10 @@ def _contributions(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndar
         return {}, None
     skip = set() if calibration is None else calibration.tolerance_keys
     fresh = {} if calibration is None else calibration.contributions
-    if warm is not None and warm.budget_theta is not None and warm.contributions and \
+    if misfit and calibration is not None:  # the corners' first-order budget (the model's caller)
+        skip -= set(calibration.corner_keys)
+        fresh = {name: c for name, c in fresh.items() if name not in calibration.corner_keys}
+    if not misfit and warm is not None and warm.budget_theta is not None and warm.contributions and \
             np.max(np.abs(theta[:5] - warm.budget_theta)) < _BUDGET_MOVE:
         kept = {name: c for name, c in warm.contributions.items() if name.split("[")[0] not in skip}
         return kept | fresh, warm.budget_theta

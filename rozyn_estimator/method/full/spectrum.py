@@ -340,7 +340,8 @@ class FullCarSpectrum:
         dZ, dT = corner_matrix_derivatives(self.vehicle, 1j * self.omega, directions)
         B = self._body_map
         dH = inv_d @ (B.T @ dT - (B.T @ dZ @ B) @ H)
-        part = self.sensing @ (dH @ weighted_inputs @ _h(H)) @ _h(self.sensing)
+        sensing = self._sensing_at(theta)  # with θ's calibrated sensors, if it holds them
+        part = sensing @ (dH @ weighted_inputs @ _h(H)) @ _h(sensing)
         return self._fold(part + _h(part))
 
     def sensing_derivatives(self, theta: np.ndarray, d_sensing: np.ndarray) -> np.ndarray:
