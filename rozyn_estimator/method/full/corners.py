@@ -105,9 +105,9 @@ class CornerCalibrating:
         try:
             vehicle = self.vehicle_at(theta)
         except ValueError:
-            S, dS = self.model.node_spectrum(own, derivatives)
-            return np.full_like(S, np.nan), None if dS is None else np.full(
-                (self.n_params, *S.shape), np.nan, dtype=complex)
+            shape = (self.model.n_freq, self.k, self.k)
+            return np.full(shape, np.nan, dtype=complex), \
+                np.full((self.n_params, *shape), np.nan, dtype=complex) if derivatives else None
         with self.model.assuming(vehicle):
             S, dS = self.model.node_spectrum(own, derivatives)
             if dS is None:

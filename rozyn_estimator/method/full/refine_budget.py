@@ -30,6 +30,7 @@ from collections.abc import Callable
 import numpy as np
 
 from rozyn_estimator.method.full.budget import ABS_STEP, AXLE, VehicleMove, moved_copy, vehicle_moves
+from rozyn_estimator.method.full.corners import values_of
 from rozyn_estimator.method.full.fit import CORNER_VALUES
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.full.whittle import FullWhittle
@@ -81,8 +82,7 @@ def _corner_direction(base: FullVehicle, moved: FullVehicle, factor: np.ndarray 
     else."""
     if factor is not None or not _moves_only(base, moved, CORNER_VALUES):
         return None
-    return np.concatenate([np.ravel(getattr(moved, f)) - np.ravel(getattr(base, f))
-                           for f in CORNER_VALUES]) / step
+    return (values_of(moved) - values_of(base)) / step
 
 
 def _sensor_change(model: FullCarSpectrum, base: FullVehicle, moved: FullVehicle, factor: np.ndarray | None,
