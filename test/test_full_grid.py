@@ -14,7 +14,12 @@ import pytest
 
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.method.full import estimate_full, refine_budget, whittle
-from rozyn_estimator.method.full.fit import CORNER_VALUES, corner_matrices, corner_matrix_derivatives
+from rozyn_estimator.method.full.fit import (
+    CORNER_VALUES,
+    corner_matrices,
+    corner_matrix_derivatives,
+    corner_response_derivatives,
+)
 from rozyn_estimator.method.full.grid import ALIAS_SPACING_HZ, alias_map
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.full.whittle import FullWhittle
@@ -114,6 +119,24 @@ def test_the_corner_matrices_derivatives_are_their_slopes():
         (z1, t1), (z0, t0) = at(base + h * d), at(base - h * d)
         np.testing.assert_allclose(dZ[g], (z1 - z0) / (2 * h), rtol=0, atol=1e-7 * np.abs(dZ[g]).max())
         np.testing.assert_allclose(dT[g], (t1 - t0) / (2 * h), rtol=0, atol=1e-7 * np.abs(dT[g]).max())
+
+
+def test_the_corner_responses_derivatives_are_the_products_of_the_matrices_derivatives():
+    """``left (dT r - dZ q)`` without forming dZ and dT: equal to the products of
+    :func:`corner_matrix_derivatives`' matrices (the bars included)."""
+    rng = np.random.default_rng(5)
+    s = 2j * np.pi * np.linspace(0.5, 115.0, 40)
+    base = np.concatenate([np.ravel(getattr(BARS, f)) for f in CORNER_VALUES])
+    directions = rng.standard_normal((4, base.size)) * base
+
+    def complex_normal(*shape: int) -> np.ndarray:
+        return rng.standard_normal(shape) + 1j * rng.standard_normal(shape)
+
+    left, q, r = complex_normal(s.size, 3, 4), complex_normal(s.size, 4, 3), complex_normal(s.size, 4, 3)
+    dZ, dT = corner_matrix_derivatives(BARS, s, directions)
+    expected = left @ (dT @ r - dZ @ q)
+    got = corner_response_derivatives(BARS, s, directions, left, q, r)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
 
 
 def test_the_analytic_contributions_are_the_differences(monkeypatch):

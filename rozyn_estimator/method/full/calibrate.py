@@ -14,13 +14,15 @@ priors, the values the data pin down are corrected and the rest keep their toler
 
 From the fit's optimum (the new values at the model's assumed ones) one scoring step of the
 posterior when no value moves by more than ``_FAR`` posterior std (the one-step estimator),
-else the fit's trust-region optimiser to the mode; with corner values also when the step
-leaves the posterior short of its mode (they act on S nonlinearly). The model then assumes the calibrated
-sensors (:class:`SensorCalibration`'s ``values``); what their remaining uncertainty adds to
-the estimate is the augmented inverse information's θ block beyond the fit's own,
-``A (F_ββ + P - F_βθ A)⁻¹ Aᵀ`` with ``A = F⁻¹ F_θβ``, split per value by the symmetric square
-root of the middle factor (:func:`_contributions`): when the data know nothing of the values
-that is the first-order budget's contributions, value by value.
+else the fit's trust-region optimiser to the mode. Corner values act on S nonlinearly: when
+the first step leaves the posterior short of its mode, a second scoring step from there (the
+trust region's first, without its check evaluation), or the optimiser when far short. The
+model then assumes the calibrated sensors (:class:`SensorCalibration`'s ``values``); what
+their remaining uncertainty adds to the estimate is the augmented inverse information's θ
+block beyond the fit's own, ``A (F_ββ + P - F_βθ A)⁻¹ Aᵀ`` with ``A = F⁻¹ F_θβ``, split per
+value by the symmetric square root of the middle factor (:func:`_contributions`): when the
+data know nothing of the values that is the first-order budget's contributions, value by
+value.
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
 
 _FAR = 3.0  # a step longer than this many posterior std: beyond the linear range
 _CONVERGED = 0.01  # Newton decrement at which the optimiser has found the mode
+_SECOND_STEP = 1.0  # after the first step, a decrement below this takes one more step, above it scoring
 _KEEP_MOVE = 0.01  # a warm update takes the calibration over while ln m, ln I, logit l_f, y_c [m] move less
 _KEEP_UPDATES = 10  # ... for at most this many windows (at 5 s apart: as many new seconds as half a window)
 _DEPARTED = 3.0  # a value further than this many tolerances from the file's gets a note
@@ -136,10 +139,16 @@ def calibrate_vehicle(
     near = bool(np.all(np.abs(step) <= _FAR * np.sqrt(np.abs(np.diag(inv)))))
     if near:  # the one-step estimator: the information at its start stands for the mode's
         point = point + step
-    if not near or (corner_keys and posterior.decrement(point) >= _CONVERGED):
-        # far off: the nuisances that absorbed the departure (a noise floor) must move back; or
-        # the corner values act on S too nonlinearly for one step (a tyre's damping moves by
-        # tens of %): scoring to the mode
+    remaining = posterior.decrement(point) if near and corner_keys else 0.0
+    if near and _CONVERGED <= remaining < _SECOND_STEP:
+        # the corner values act on S nonlinearly (a tyre's damping moves by tens of %): a
+        # second step, from the first's information (Newton's convergence leaves ~remaining²)
+        _, grad = posterior.evaluate(point)
+        info = _information(posterior, point)
+        point = point - np.linalg.solve(posterior.hess(point), grad)
+    elif not near or remaining >= _SECOND_STEP:
+        # far off: the nuisances that absorbed the departure (a noise floor) must move back, or
+        # the corners too nonlinear for two steps: scoring to the mode
         found = scoring(posterior, point if near else backtracked(posterior.fun, point, step, value),
                         _CONVERGED, max_iter)
         point, converged = found.x, bool(found.get("success")) or posterior.decrement(found.x) < _CONVERGED

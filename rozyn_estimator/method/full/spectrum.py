@@ -43,7 +43,7 @@ from numpy.polynomial import legendre
 from scipy import sparse, special
 
 from rozyn_estimator.method.full import sensing as sensor_model
-from rozyn_estimator.method.full.fit import corner_matrices, corner_matrix_derivatives
+from rozyn_estimator.method.full.fit import corner_matrices, corner_response_derivatives
 from rozyn_estimator.method.full.grid import ALIAS_SPACING_HZ, alias_map, apply, evaluation_map
 from rozyn_estimator.method.likelihood.road_input import delay_characteristic, spatial_band
 from rozyn_estimator.vehicle_full import FullVehicle
@@ -333,15 +333,15 @@ class FullCarSpectrum:
 
     def corner_derivatives(self, theta: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """dS (G, nodes, k, k) at θ along ``directions`` (G, 22) of the corners' values
-        (:func:`~rozyn_estimator.method.full.fit.corner_matrix_derivatives`): ``D = Bᵀ Z B -
+        (:func:`~rozyn_estimator.method.full.fit.corner_response_derivatives`): ``D = Bᵀ Z B -
         ω² M`` and ``Bᵀ T`` move, so ``dH = D⁻¹ (Bᵀ dT - Bᵀ dZ B H)``, and ``d(H R Hᴴ) = dH R Hᴴ
         + h.c.`` — one batched pass instead of a model evaluation per value."""
-        inv_d, H, weighted_inputs, _, _ = self._body_motion(theta)
-        dZ, dT = corner_matrix_derivatives(self.vehicle, 1j * self.omega, directions)
+        inv_d, H, weighted_inputs, motion, _ = self._body_motion(theta)
         B = self._body_map
-        dH = inv_d @ (B.T @ dT - (B.T @ dZ @ B) @ H)
         sensing = self._sensing_at(theta)  # with θ's calibrated sensors, if it holds them
-        part = sensing @ (dH @ weighted_inputs @ _h(H)) @ _h(sensing)
+        # P dH R Hᴴ Pᴴ = (P D⁻¹ Bᵀ) (dT R Hᴴ Pᴴ - dZ B H R Hᴴ Pᴴ)
+        part = corner_response_derivatives(self.vehicle, 1j * self.omega, directions, sensing @ inv_d @ B.T,
+                                           B @ motion @ _h(sensing), weighted_inputs @ _h(H) @ _h(sensing))
         return self._fold(part + _h(part))
 
     def sensing_derivatives(self, theta: np.ndarray, d_sensing: np.ndarray) -> np.ndarray:
