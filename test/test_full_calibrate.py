@@ -9,7 +9,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from rozyn_estimator.method.full import FullEstimate, estimate_full
+from rozyn_estimator.method.full import FullEstimate, calibrate, estimate_full
 from rozyn_estimator.method.full.calibrate import VehicleCalibration, sensor_groups
 from rozyn_estimator.method.full.corners import CornerCalibrating, corner_keys
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
@@ -171,6 +171,17 @@ def test_derivatives_by_the_corner_values_match_differences() -> None:
     scaled[model.n_params:] = 1.01 * (1.0 + th[model.n_params:]) - 1.0
     S2, _ = calibrating.node_spectrum(scaled, False)
     assert np.abs(S2 - S).max() < 1e-9 * np.abs(S).max()
+
+
+def test_a_second_step_that_leaves_the_shares_range_is_not_taken() -> None:
+    """The calibration's unchecked second step must keep every corner value a vehicle's."""
+    model, theta = _model()
+    calibrating = CornerCalibrating(model, CAR, corner_keys(CAR))
+    inside = np.r_[theta, np.full(len(calibrating.keys), -0.5)]
+    outside = inside.copy()
+    outside[-1] = -0.95
+    assert calibrate._shares_valid(calibrating, inside)
+    assert not calibrate._shares_valid(calibrating, outside)
 
 
 def test_a_corner_value_off_by_its_tolerance_is_calibrated() -> None:

@@ -30,6 +30,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 
@@ -145,7 +146,8 @@ def calibrate_vehicle(
         # second step, from the first's information (Newton's convergence leaves ~remaining²)
         _, grad = posterior.evaluate(point)
         info = _information(posterior, point)
-        point = point - np.linalg.solve(posterior.hess(point), grad)
+        second = point - np.linalg.solve(posterior.hess(point), grad)
+        point = second if _shares_valid(model, second) else point
     elif not near or remaining >= _SECOND_STEP:
         # far off: the nuisances that absorbed the departure (a noise floor) must move back, or
         # the corners too nonlinear for two steps: scoring to the mode
@@ -162,6 +164,15 @@ def calibrate_vehicle(
                                      contributions, point[:5].copy(), converged, corner_keys=corner_keys,
                                      corner_shares=fitted[n_sensor:].copy())
     return point[:n], calibration
+
+
+def _shares_valid(model: FullCarSpectrum | CornerCalibrating, point: np.ndarray) -> bool:
+    """The corner shares of ``point`` make a vehicle (each value above its lowest share)."""
+    try:
+        cast(CornerCalibrating, model).vehicle_at(point)
+    except ValueError:
+        return False
+    return True
 
 
 def _contributions(
