@@ -81,6 +81,17 @@ CORNER_VALUES = ("suspension_stiffness_npm", "suspension_damping_nspm", "tyre_st
 """The values :func:`corner_matrices` depends on beside the geometry: four corners' each, two bars."""
 
 
+def _corner_parts(v: FullVehicle, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(``s`` (F, 1), ``Z_s`` (F, 4, 4) with the bars, ``Z_t``'s diagonal (F, 4), ``A = N⁻¹``)
+    of the corners at ``s``: what the derivatives below share."""
+    s = np.asarray(s)[:, None]
+    zs = (np.asarray(v.suspension_stiffness_npm) + s * np.asarray(v.suspension_damping_nspm))[:, :, None] \
+        * np.eye(4) + _axle_bars(v)
+    zt = np.asarray(v.tyre_stiffness_npm) + s * np.asarray(v.tyre_damping_nspm)  # (F, 4) diagonal
+    A = np.linalg.inv(zs + (zt + np.asarray(v.unsprung_mass_kg) * s * s)[:, :, None] * np.eye(4))
+    return s, zs, zt, A
+
+
 def corner_matrix_derivatives(v: FullVehicle, s: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray,
                                                                                                np.ndarray]:
     """``(dZ, dT)`` (G, F, 4, 4) of :func:`corner_matrices` along ``directions`` (G, 22): per
@@ -88,11 +99,7 @@ def corner_matrix_derivatives(v: FullVehicle, s: np.ndarray, directions: np.ndar
     the front and rear bars). With ``A = N⁻¹``: ``dZ = dZ_s - dZ_s A Z_s - Z_s A dZ_s +
     Z_s A dN A Z_s`` and ``dT = (dZ_s - Z_s A dN) A Z_t + Z_s A dZ_t`` (``N``, ``Z_s``
     symmetric, so ``Z_s A = (A Z_s)ᵀ``)."""
-    s = np.asarray(s)[:, None]
-    zs = (np.asarray(v.suspension_stiffness_npm) + s * np.asarray(v.suspension_damping_nspm))[:, :, None] \
-        * np.eye(4) + _axle_bars(v)
-    zt = np.asarray(v.tyre_stiffness_npm) + s * np.asarray(v.tyre_damping_nspm)  # (F, 4) diagonal
-    A = np.linalg.inv(zs + (zt + np.asarray(v.unsprung_mass_kg) * s * s)[:, :, None] * np.eye(4))
+    s, zs, zt, A = _corner_parts(v, s)
     a_zs = A @ zs
     d = np.asarray(directions, dtype=float)
     ks, cs, kt, ct, mu = (d[:, None, 4 * i: 4 * i + 4] for i in range(5))  # (G, 1, 4) each
@@ -120,11 +127,7 @@ def corner_response_derivatives(v: FullVehicle, s: np.ndarray, directions: np.nd
     but for the bars' 2×2 blocks: elementwise products, then one batched product of
     (k, 8) by (8, k) matrices. Why its own: the corners' calibration takes it at every
     evaluation, and the stacked (G, F, 4, 4) products were two thirds of that time."""
-    s = np.asarray(s)[:, None]
-    zs = (np.asarray(v.suspension_stiffness_npm) + s * np.asarray(v.suspension_damping_nspm))[:, :, None] \
-        * np.eye(4) + _axle_bars(v)
-    zt = np.asarray(v.tyre_stiffness_npm) + s * np.asarray(v.tyre_damping_nspm)  # (F, 4) diagonal
-    A = np.linalg.inv(zs + (zt + np.asarray(v.unsprung_mass_kg) * s * s)[:, :, None] * np.eye(4))
+    s, zs, zt, A = _corner_parts(v, s)
     zs_a = zs @ A
     w = q - A @ (zs @ q + zt[:, :, None] * r)  # q - A Z_s q - A Z_t r
     in_wheels = q - w  # A Z_s q + A Z_t r
