@@ -173,12 +173,26 @@ def _signal_during_updates(count: int, seed: int) -> list[tuple[int, str, str]]:
                         os.killpg(proc.pid, SIGNALS[i % 2])
                         sent.add(i)
             assert len(sent) == count, f"only {sorted(updated)} published an update"
-            outputs = [p.communicate(timeout=60) for p in procs]
+            outputs = [_ended(p, 60.0) for p in procs]
         finally:
             for p in procs:
                 if p.poll() is None:
                     os.killpg(p.pid, signal.SIGKILL)
     return [(p.returncode, out, err) for p, (out, err) in zip(procs, outputs, strict=True)]
+
+
+def _ended(proc: subprocess.Popen[str], timeout_s: float) -> tuple[str, str]:
+    """(stdout, stderr) of ``proc`` once it ends; if it does not within ``timeout_s``, its
+    threads' stacks (SIGUSR1: the console scripts' faulthandler) end the test's message."""
+    try:
+        return proc.communicate(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGUSR1)
+        time.sleep(2.0)
+        proc.kill()
+        _, err = proc.communicate()
+        raise AssertionError(f"pid {proc.pid} did not end within {timeout_s:g} s; its stderr:\n"
+                             f"{err[-6000:]}") from None
 
 
 def test_signals_during_updates_end_estimator_node_cleanly_20_times():
@@ -254,3 +268,25 @@ def test_the_three_nodes_stop_cleanly_at_any_moment(moment, tmp_path):
     if (tmp_path / "bag").exists():  # the recorder got as far as creating it: a whole bag
         counts = check_bag(tmp_path / "bag")
         assert moment == "start-up" or counts["/accel/front"] > 0
+
+
+def test_sigusr1_prints_the_threads_stacks_and_the_node_runs_on():
+    """``kill -USR1`` on a node shows what each of its threads is doing (a node that does not
+    stop can be asked why) and does not stop it: SIGINT then ends it with status 0."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN), PYTHONUNBUFFERED="1")
+    (proc,) = _start_estimators(1, env)
+    try:
+        with ros_session(DOMAIN) as ros:
+            pub = ros.probe.create_publisher(Imu, "accel/front", 10)
+            assert ros.spin_until(lambda: pub.get_subscription_count() == 1, 60.0), "estimator not up"
+        proc.send_signal(signal.SIGUSR1)
+        time.sleep(1.0)
+        assert proc.poll() is None, "SIGUSR1 ended the node"
+        proc.send_signal(signal.SIGINT)
+        _, err = _ended(proc, 60.0)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, err[-2000:]
+    assert "most recent call first" in err and "spin_node" in err, err[-2000:]
+    assert "SIGINT: stopping" in err

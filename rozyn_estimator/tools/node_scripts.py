@@ -6,11 +6,16 @@ scipy), and spins it (:func:`rozyn_estimator.ros.glue.spin_node`). So Ctrl-C or 
 at any moment once this module runs, start-up included, ends the node in order with exit
 status 0. (Before it runs, in the interpreter's own start-up and the ROS wheels' re-exec,
 a signal has its default effect.) The handlers stay installed until the process exits.
+
+SIGUSR1 prints every thread's Python stack to stderr and the node runs on (``kill -USR1
+<pid>``): what a node that does not stop is doing, without stopping it.
 """
 
 from __future__ import annotations
 
+import faulthandler
 import importlib
+import signal
 
 from rozyn_estimator.ros.stop import StopRequest
 
@@ -25,6 +30,8 @@ NODES = {
 def run(executable: str) -> int:
     """Catch the stop signals, import the node of ``executable``, spin it; the exit status."""
     stop = StopRequest().install()
+    if hasattr(signal, "SIGUSR1"):
+        faulthandler.register(signal.SIGUSR1, all_threads=True)
     module, _, cls = NODES[executable].partition(":")
     from rozyn_estimator.ros.glue import spin_node
 
