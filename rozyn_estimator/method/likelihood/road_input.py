@@ -18,10 +18,27 @@ def delay_characteristic(
     v = np.atleast_1d(np.asarray(speed_mps, dtype=float))
     if np.ptp(v) <= 1e-9 * v.mean():
         return np.exp(-1j * omega * wheelbase_m / v.mean())
-    # The delays' distribution on 64 bins: cheap, and exact to far below the band.
+    tau, weights = _delays(wheelbase_m, v)
+    return np.exp(-1j * np.multiply.outer(omega, tau)) @ weights
+
+
+def delay_slope(omega: np.ndarray, wheelbase_m: float, speed_mps: float | np.ndarray) -> np.ndarray:
+    """dφ/dL of :func:`delay_characteristic`: every delay ``τ = L/v`` scales with ``L`` (the
+    weights stay), so ``dφ/dL = E[-iω τ/L exp(-iωτ)]``."""
+    tau, weights = _delays(wheelbase_m, speed_mps)
+    arg = -1j * np.multiply.outer(omega, tau)
+    return (arg * np.exp(arg)) @ weights / wheelbase_m
+
+
+def _delays(wheelbase_m: float, speed_mps: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the delays τ [s], their weights summing to 1): one for a constant speed, else the
+    delays' distribution on 64 bins weighted by speed (cheap, and exact to far below the band:
+    a faster stretch weighs more)."""
+    v = np.atleast_1d(np.asarray(speed_mps, dtype=float))
+    if np.ptp(v) <= 1e-9 * v.mean():
+        return np.array([wheelbase_m / v.mean()]), np.ones(1)
     weights, edges = np.histogram(wheelbase_m / v, bins=64, weights=v)
-    tau = 0.5 * (edges[:-1] + edges[1:])
-    return np.exp(-1j * np.multiply.outer(omega, tau)) @ (weights / weights.sum())
+    return 0.5 * (edges[:-1] + edges[1:]), weights / weights.sum()
 
 
 _ROLL_OFF = 0.1  # spatial_band's raised-cosine edge, ± this share of its end frequency
