@@ -24,7 +24,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum, track_coherence
+from rozyn_estimator.method.full.spectrum import FullCarSpectrum, herm, track_coherence
 from rozyn_estimator.method.likelihood.road_input import delay_slope
 
 GEOMETRY = ("wheelbase_m", "track_front_m", "track_rear_m")
@@ -49,8 +49,8 @@ def geometry_derivatives(model: FullCarSpectrum, theta: np.ndarray, keys: Sequen
             raise ValueError(f"{key} is not a geometry value ({', '.join(GEOMETRY)})")
     d_t = d_map.swapaxes(-1, -2)[:, None]  # (G, 1, 3, 4)
     d_h = inv_d @ (d_t @ (T - Z @ (B @ H)) - (B.T @ Z) @ (d_map[:, None] @ H))  # (G, F, 3, 4)
-    part = sensing @ d_h @ (inputs @ _h(H) @ _h(sensing))
-    part = part + _h(part)
+    part = sensing @ d_h @ (inputs @ herm(H) @ herm(sensing))
+    part = part + herm(part)
     for g, key in enumerate(keys):
         if key == "wheelbase_m":
             slope = delay_slope(model.omega, v.wheelbase_m, model.speed_mps)
@@ -58,19 +58,16 @@ def geometry_derivatives(model: FullCarSpectrum, theta: np.ndarray, keys: Sequen
             d_delay = np.stack([zero, slope.conj(), slope, zero], axis=-1).reshape(-1, 2, 2)
             gamma, _ = track_coherence(model.x_coherence * np.exp(theta[model.index["ln_coherence_scale"]]))
             d_inputs = model.road_weight(theta)[:, None, None] * model.road_inputs(gamma, delay=d_delay)
-            part[g] += sensing @ H @ d_inputs @ _h(H) @ _h(sensing)
+            part[g] += sensing @ H @ d_inputs @ herm(H) @ herm(sensing)
         elif key == "track_front_m":
-            part[g] += sensing @ d_motion @ _h(sensing) / v.track_front_m
+            part[g] += sensing @ d_motion @ herm(sensing) / v.track_front_m
     out = model.fold(part)
-    bars = [(g, *_BAR[key]) for g, key in enumerate(keys) if key in _BAR and getattr(v, _BAR[key][1]) != 0]
+    bars = [(g, *_BAR[key], getattr(v, key)) for g, key in enumerate(keys)
+            if key in _BAR and getattr(v, _BAR[key][1]) != 0]
     if bars:
         directions = np.zeros((len(bars), 22))
-        for j, (_, column, name) in enumerate(bars):
-            directions[j, column] = -2.0 * getattr(v, name) / getattr(v, keys[bars[j][0]])
+        for j, (_, column, bar, track) in enumerate(bars):
+            directions[j, column] = -2.0 * getattr(v, bar) / track  # d(K/t²)/dt = -2K/t³
         out[[g for g, *_ in bars]] += model.corner_derivatives(theta, directions)
     return out
 
-
-def _h(m: np.ndarray) -> np.ndarray:
-    """The conjugate transpose of stacked matrices."""
-    return m.conj().swapaxes(-1, -2)

@@ -297,7 +297,7 @@ class FullCarSpectrum:
     def _spectrum(self, theta: np.ndarray, derivatives: bool) -> tuple[np.ndarray, np.ndarray | None]:
         sensing = self.sensing_at(theta)
         inv_d, _, _, motion, d_motion = self.body_motion(theta)
-        per_alias = sensing @ motion @ _h(sensing)  # (F, k, k)
+        per_alias = sensing @ motion @ herm(sensing)  # (F, k, k)
         S_road = self.fold(per_alias)
         noise = np.exp(theta[self.noise_slice])
         S = S_road + np.eye(self.k) * (noise + self.min_noise_psd)
@@ -307,15 +307,15 @@ class FullCarSpectrum:
         # ∂D = -ω² ∂M: ∂H = ω² D⁻¹ ∂M H, so ∂(P H R Hᴴ Pᴴ) = ω² P D⁻¹ ∂M (H R Hᴴ) Pᴴ + h.c.
         _, dM = self._mass_matrix(theta)
         Q = (self.omega**2)[:, None, None] * (sensing @ inv_d)
-        part = (Q[None] @ dM[:, None]) @ (motion @ _h(sensing))  # (p, F, k, k); matmul: einsum is 4x slower
+        part = (Q[None] @ dM[:, None]) @ (motion @ herm(sensing))  # (p, F, k, k); matmul: einsum is 4x slower
         # the body's, the road shape's and the coherence's derivatives folded in one pass (one
         # sparse product: the same sums as one each, a fraction of the calls)
         shape = self.shape_basis.shape[0]
         folded = self.fold(np.concatenate([
             part, -self.log_shape[None, :, None, None] * per_alias,
-            self.shape_basis[:, :, None, None] * per_alias, (sensing @ d_motion @ _h(sensing))[None]]))
+            self.shape_basis[:, :, None, None] * per_alias, (sensing @ d_motion @ herm(sensing))[None]]))
         dS[:5] = folded[:5]
-        dS[:5] += _h(dS[:5])
+        dS[:5] += herm(dS[:5])
         dS[5] = S_road
         dS[6: 7 + shape] = folded[5: 6 + shape]
         dS[self.index["ln_coherence_scale"]] = folded[6 + shape]
@@ -331,8 +331,8 @@ class FullCarSpectrum:
         values = sensor_model.unpack(theta[self.calibration_slice], self.calibrate, self.k)
         d_sensing = sensor_model.derivatives(self.sensing, self.omega, self.rear, values, self.calibrate)
         _, _, _, motion, _ = self.body_motion(theta)
-        part = d_sensing @ (motion @ _h(self.sensing_at(theta)))
-        return self.fold(part + _h(part))
+        part = d_sensing @ (motion @ herm(self.sensing_at(theta)))
+        return self.fold(part + herm(part))
 
     def corner_derivatives(self, theta: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """dS (G, nodes, k, k) at θ along ``directions`` (G, 22) of the corners' values
@@ -344,16 +344,17 @@ class FullCarSpectrum:
         sensing = self.sensing_at(theta)  # with θ's calibrated sensors, if it holds them
         # P dH R Hᴴ Pᴴ = (P D⁻¹ Bᵀ) (dT R Hᴴ Pᴴ - dZ B H R Hᴴ Pᴴ)
         part = corner_response_derivatives(self.vehicle, 1j * self.omega, directions, sensing @ inv_d @ B.T,
-                                           B @ motion @ _h(sensing), weighted_inputs @ _h(H) @ _h(sensing))
-        return self.fold(part + _h(part))
+                                           B @ motion @ herm(sensing),
+                                           weighted_inputs @ herm(H) @ herm(sensing))
+        return self.fold(part + herm(part))
 
     def sensing_derivatives(self, theta: np.ndarray, d_sensing: np.ndarray) -> np.ndarray:
         """dS (G, nodes, k, k) at θ for changes ``d_sensing`` (G, F, k, 3) of :meth:`sensing_of`
         (a sensor's position, gain or timing): S is ``P_s (H R Hᴴ) P_sᴴ`` and the body's
         motion stays."""
         _, _, _, motion, _ = self.body_motion(theta)
-        part = d_sensing @ (motion @ _h(self.sensing))
-        return self.fold(part + _h(part))
+        part = d_sensing @ (motion @ herm(self.sensing))
+        return self.fold(part + herm(part))
 
     def body_motion(self, theta: np.ndarray) -> tuple[np.ndarray, ...]:
         """(D⁻¹, ``H = D⁻¹ Bᵀ T`` (F, 3, 4) the body's response to the wheels' road, the road's
@@ -368,8 +369,8 @@ class FullCarSpectrum:
         gamma, d_gamma = track_coherence(self.x_coherence * math.exp(theta[self.index["ln_coherence_scale"]]))
         weight = self.road_weight(theta)[:, None, None]
         inputs = weight * self.road_inputs(gamma)
-        motion = H @ inputs @ _h(H)
-        d_motion = H @ (weight * self.road_inputs(d_gamma, diagonal=0.0)) @ _h(H)
+        motion = H @ inputs @ herm(H)
+        d_motion = H @ (weight * self.road_inputs(d_gamma, diagonal=0.0)) @ herm(H)
         self._body_key, self._body_value = key, (inv_d, H, inputs, motion, d_motion)
         return self._body_value
 
@@ -401,7 +402,7 @@ class FullCarSpectrum:
         return out + (total if self._alias_fold is None else self._alias_fold(total))
 
 
-def _h(m: np.ndarray) -> np.ndarray:
+def herm(m: np.ndarray) -> np.ndarray:
     """The conjugate transpose of stacked matrices."""
     return m.conj().swapaxes(-1, -2)
 

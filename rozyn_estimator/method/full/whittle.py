@@ -16,7 +16,7 @@ import math
 import numpy as np
 from scipy.optimize import OptimizeResult, minimize
 
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.spectrum import FullCarSpectrum, herm
 
 _HESSIAN_STEP = 3  # the optimiser's Fisher information: every 3rd frequency (class docstring)
 _HESSIAN_MIN = 300  # ... of models with at least this many frequencies
@@ -69,7 +69,7 @@ class FullWhittle:
 
     def _nll(self, linv: np.ndarray) -> float:
         log_det = -2.0 * np.log(np.einsum("kaa->ka", linv).real).sum(axis=1)
-        fit = np.einsum("kaa->k", linv @ self.periodogram @ _h(linv)).real
+        fit = np.einsum("kaa->k", linv @ self.periodogram @ herm(linv)).real
         return float(self.counts @ (log_det + fit))
 
     def evaluate(self, theta: np.ndarray) -> tuple[float, np.ndarray]:
@@ -103,7 +103,7 @@ class FullWhittle:
         if linv is None:
             self._state, self._value = None, (math.inf, np.zeros(self.model.n_params))
             return self._value
-        inv = _h(linv) @ linv
+        inv = herm(linv) @ linv
         W = self.model.to_nodes(self.counts[:, None, None] * (inv - inv @ self.periodogram @ inv))
         grad = (dS.reshape(dS.shape[0], -1) @ W.swapaxes(1, 2).ravel()).real  # Σ_k tr(W ∂S)
         penalty = 0.5 * float(self.precision @ theta**2)
@@ -117,7 +117,7 @@ class FullWhittle:
         if self._state is None:
             return None
         linv = self._state[2]
-        return linv @ self.periodogram @ _h(linv)
+        return linv @ self.periodogram @ herm(linv)
 
     def fun(self, theta: np.ndarray) -> float:
         return self.evaluate(theta)[0]
@@ -151,7 +151,7 @@ class FullWhittle:
         p, K, k, _ = dS.shape
         roots = self._root_counts if root_counts is None else root_counts
         left = linv @ dS.transpose(1, 2, 0, 3).reshape(K, k, p * k)  # (K, a, (p, b)): L⁻¹ ∂S
-        both = left.reshape(K, k * p, k) @ (_h(linv) * roots)  # (K, (a, p), d)
+        both = left.reshape(K, k * p, k) @ (herm(linv) * roots)  # (K, (a, p), d)
         W = both.reshape(K, k, p, k).transpose(2, 0, 1, 3).reshape(p, -1)
         return np.concatenate([W.real, W.imag], axis=1)
 
@@ -241,6 +241,3 @@ def _inverse_cholesky(S: np.ndarray) -> np.ndarray | None:
     eye = np.broadcast_to(np.eye(S.shape[-1]), S.shape)
     return np.linalg.solve(L, eye)
 
-
-def _h(m: np.ndarray) -> np.ndarray:
-    return m.conj().swapaxes(-1, -2)

@@ -16,7 +16,7 @@ def delay_characteristic(
     faster stretch weighs more. A constant speed gives the exact wheelbase delay.
     """
     v = np.atleast_1d(np.asarray(speed_mps, dtype=float))
-    if np.ptp(v) <= 1e-9 * v.mean():
+    if np.ptp(v) <= 1e-9 * v.mean():  # as ever (the recorded sample bags replay bit for bit)
         return np.exp(-1j * omega * wheelbase_m / v.mean())
     tau, weights = _delays(wheelbase_m, v)
     return np.exp(-1j * np.multiply.outer(omega, tau)) @ weights
