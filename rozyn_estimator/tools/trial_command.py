@@ -13,6 +13,7 @@ import json
 import sys
 from collections.abc import Sequence
 
+from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS
 from rozyn_estimator.tools.drives import run_any_drive
 from rozyn_estimator.tools.options import (
@@ -67,6 +68,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     seeds = p.add_mutually_exclusive_group()
     seeds.add_argument("--seed", type=int, default=1, help="one seed (default: 1)")
     seeds.add_argument("--seeds", metavar="SPEC", help="seeds: 1-100, or 1,5,9-12")
+    p.add_argument("--limit", action="store_true",
+                   help="with --model full: one fit to the periodogram averaged over the seeds' records, "
+                        "the estimate's infinite-data limit: its departure from the truth is the model's "
+                        "own bias, free of the roads' scatter, with its standard error")
     p.add_argument("--jobs", type=int, default=None, help="parallel processes (default: all cores)")
     p.add_argument("--json", action="store_true", help="one JSON object per trial per line")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -86,6 +91,14 @@ def trial_spec(args: argparse.Namespace) -> TrialSpec:
 
 def run(args: argparse.Namespace) -> int:
     """``rozyn trial``."""
+    if args.limit:
+        if args.model != "full" or args.durations_s is not None:
+            raise ConfigError("--limit: the full car's records of one measurement time (--model full, "
+                              "--duration-s)")
+        from rozyn_estimator.tools import limit_full
+
+        args.method = args.method or "likelihood"
+        return limit_full.run(args)
     if args.durations_s is not None:
         return run_drives(args)
     if args.model == "full":

@@ -11,7 +11,7 @@ information as its Hessian (scoring), until the Newton decrement is below ``tol`
 Work (issue 13: one update within 3x the half car's): the model is evaluated on a 0.05 Hz
 grid and interpolated (:mod:`.grid`; ``grid_hz``; at every frequency once a noise floor runs
 to zero, where S is nearly singular), the optimiser's Hessian sums over every 3rd frequency
-(:mod:`.whittle`), and a cold start is first fitted to means over 0.1 Hz (:func:`_coarse_fit`:
+(:mod:`.whittle`), and a cold start is first fitted to means over 0.1 Hz (:func:`.means.coarse_fit`:
 far from the optimum the likelihood's broad shape suffices), which leaves the fine fit a
 step or two. The estimates stay within 0.05 of their std of the exact computation's (tested).
 
@@ -48,7 +48,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -58,21 +58,19 @@ from rozyn_estimator.method.full.calibrate import VehicleCalibration, calibrate_
 from rozyn_estimator.method.full.corners import corner_keys
 from rozyn_estimator.method.full.fitcheck import full_model_fit
 from rozyn_estimator.method.full.intermittency import variance_factors
+from rozyn_estimator.method.full.means import GROUP_HZ, coarse_fit, grouped, kernel_m2
 from rozyn_estimator.method.full.refine_budget import refinement_contributions
 from rozyn_estimator.method.full.score import sandwich_ratio
-from rozyn_estimator.method.full.spectrum import BODY_NAMES, FullCarSpectrum, expected_periodogram_m2
+from rozyn_estimator.method.full.spectrum import BODY_NAMES, FullCarSpectrum
 from rozyn_estimator.method.full.whittle import FullWhittle, ridged, scoring
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.covariance import NOISE_AT_ZERO
 from rozyn_estimator.method.likelihood.fitcheck import ModelFit, neighbour_correlation
 from rozyn_estimator.method.likelihood.score import SandwichRatio
-from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, taper_window, window_spectra
+from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, window_spectra
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
 
 _MIN_NOISE = 1e-9  # the model's fixed white floor, share of each channel's band power
-_GROUP_HZ = 0.02  # the periodogram's means span at most this (module docstring)
-_COARSE_HZ = 0.1  # a cold start's first fit: means over this (:func:`_coarse_fit`)
-_COARSE_TOL = 5.0  # ... to this Newton decrement
 _FIRST_ITERATIONS = 25  # the first start's share of max_iter when a second may follow (noisy data: 3-15)
 _CLOSE = 0.25  # a result further than this share from its start calls for the grid's start too
 _BUDGET_MOVE = 0.01  # a warm update keeps the budget while ln m, ln I, logit l_f, y_c [m] move less
@@ -130,7 +128,7 @@ class _FitError(Exception):
 def refine_full(
     accel_mps2: np.ndarray, fs_hz: float, vehicle: FullVehicle, sensors: Sequence[int],
     start: np.ndarray | None, speed_mps: float | np.ndarray, config: LikelihoodConfig | None = None,
-    warm: FullRefinement | None = None,
+    warm: FullRefinement | None = None, spectra: Spectra | None = None,
 ) -> FullRefinement:
     """Maximum-likelihood ``(m, I_xx, I_yy, l_f, y_c)`` of the full car from a window.
 
@@ -144,12 +142,15 @@ def refine_full(
         config: the refinement's settings (the half car's: band, taper, aliases, road shape,
             second start, noise share, iterations, tolerance).
         warm: the previous window's refinement (its θ is the first start).
+        spectra: the window's spectra (:func:`window_spectra` of ``accel_mps2`` with the
+            config's band and taper) when given, e.g. the periodogram averaged over many records
+            of one condition: the fit's infinite-data limit (:mod:`rozyn_estimator.tools.limit_full`).
     """
     cfg = config or LikelihoodConfig()
     started = time.perf_counter()
     try:
         result = _refine(np.asarray(accel_mps2, dtype=float), float(fs_hz), vehicle, tuple(sensors), start,
-                         speed_mps, cfg, warm)
+                         speed_mps, cfg, warm, spectra)
     except _FitError as exc:
         result = FullRefinement(status="failed", reason=str(exc))
     except (np.linalg.LinAlgError, ArithmeticError, ValueError) as exc:
@@ -159,20 +160,20 @@ def refine_full(
 
 def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, ...],
             start: np.ndarray | None, speed: float | np.ndarray, cfg: LikelihoodConfig,
-            warm: FullRefinement | None) -> FullRefinement:
+            warm: FullRefinement | None, given: Spectra | None = None) -> FullRefinement:
     band = (cfg.band_hz[0], min(cfg.band_hz[1], cfg.max_band_nyquist * fs / 2.0))
     v = np.atleast_1d(np.asarray(speed, dtype=float))
     if not (v.size and np.all(np.isfinite(v)) and np.all(v > 0)):
         raise _FitError("likelihood fit needs a positive speed")
     if v.size not in (1, y.shape[0]):
         raise _FitError(f"speed: expected 1 or {y.shape[0]} values, got {v.size}")
-    spectra = window_spectra(y, fs, band, cfg.taper)
+    spectra = _spectra(y, fs, band, cfg.taper, given)
     if spectra.freq_hz.size < 50:
         raise _FitError(f"too few frequencies in {band[0]:g}-{band[1]:g} Hz")
     power = band_power(spectra)
-    freq, periodogram, counts = _grouped(spectra.freq_hz, spectra.periodogram,
-                                         max(1, int(_GROUP_HZ * y.shape[0] / fs + 1e-9)))
-    kernel = _kernel_m2(y.shape[0], fs, cfg.taper, counts)
+    freq, periodogram, counts = grouped(spectra.freq_hz, spectra.periodogram,
+                                         max(1, int(GROUP_HZ * y.shape[0] / fs + 1e-9)))
+    kernel = kernel_m2(y.shape[0], fs, cfg.taper, counts)
     groups = sensor_groups(vehicle, sensors) if cfg.self_calibrate else ()
     corners = corner_keys(vehicle) if cfg.self_calibrate else ()
     assumed = warm.calibration if warm is not None and warm.calibration is not None \
@@ -188,7 +189,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     best: OptimizeResult | None = None
     iterations = starts = 0
 
-    ahead = _coarse_fit(spectra, y.shape[0], model, cfg)
+    ahead = coarse_fit(spectra, y.shape[0], model, cfg)
     # a calibration's step completes the fit (as the half car's: the estimates move by < 0.01 std)
     calibrating = bool(groups or corners)
     fit_cfg = dataclasses.replace(cfg, tol=cfg.tol_calibrated) if calibrating and assumed is None else cfg
@@ -312,44 +313,18 @@ def _contributions(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndar
     return refinement_contributions(objective, theta, theta_cov, vehicle, skip) | fresh, theta[:5].copy()
 
 
-def _grouped(freq_hz: np.ndarray, periodogram: np.ndarray, step: int) -> tuple[np.ndarray, ...]:
-    """(frequencies, periodogram matrices, counts) of the means over ``step`` neighbouring bins:
-    the model is smooth on that scale (``grid_hz``), and the means' Wishart likelihood keeps
-    nearly all the information at a ``step``-th of the work."""
-    if step <= 1:
-        return freq_hz, periodogram, np.ones(freq_hz.size)
-    starts = np.arange(0, freq_hz.size, step)
-    counts = np.diff(np.r_[starts, freq_hz.size]).astype(float)
-    return (np.add.reduceat(freq_hz, starts) / counts,
-            np.add.reduceat(periodogram, starts, axis=0) / counts[:, None, None], counts)
-
-
-def _coarse_fit(spectra: Spectra, n: int, model: FullCarSpectrum,
-                cfg: LikelihoodConfig) -> Callable[[np.ndarray], np.ndarray]:
-    """θ → a cold start's fit on coarser means (``_COARSE_HZ``), to ``_COARSE_TOL``: far
-    from the optimum a Newton step needs only the likelihood's broad shape, at a fraction of
-    the work; the fine fit then takes a step or two. θ itself where that fit fails."""
-    step = max(1, int(_COARSE_HZ * n / spectra.fs_hz + 1e-9))
-    if model.grid_hz <= 0 or spectra.freq_hz.size // step < 50:
-        return lambda theta: theta
-    freq, periodogram, counts = _grouped(spectra.freq_hz, spectra.periodogram, step)
-    coarse = model.regrid(freq, _kernel_m2(n, spectra.fs_hz, cfg.taper, counts), 2.0 * model.grid_hz)
-    objective = FullWhittle(coarse, periodogram, counts)
-    settings = dataclasses.replace(cfg, tol=_COARSE_TOL)
-
-    def fit(theta: np.ndarray) -> np.ndarray:
-        res = scoring(objective, theta, settings.tol, cfg.max_iter)
-        return res.x if np.isfinite(res.fun) else theta
-
-    return fit
-
-
-def _kernel_m2(n: int, fs: float, taper: float, counts: np.ndarray) -> np.ndarray:
-    """Each mean ordinate's averaging kernel's second moment [Hz²]: the taper's spectral window
-    and the spread of the group's bins, ``Δf² (c² - 1) / 12`` (:func:`expected_periodogram_m2`;
-    an untapered window is taken as periodic, as the simulator's records are: no smoothing)."""
-    window_m2 = expected_periodogram_m2(taper_window(n, taper), fs) if taper > 0 else 0.0
-    return window_m2 + (fs / n) ** 2 * (counts**2 - 1.0) / 12.0
+def _spectra(y: np.ndarray, fs: float, band: tuple[float, float], taper: float,
+             given: Spectra | None) -> Spectra:
+    """The window's spectra: ``given`` when they are a window's of as many samples at ``fs``
+    in ``band`` (else a failure), or computed."""
+    if given is None:
+        return window_spectra(y, fs, band, taper)
+    f = given.freq_hz
+    if given.n_samples != y.shape[0] or given.fs_hz != fs or not f.size or f[0] < band[0] or f[-1] > band[1]:
+        raise _FitError(f"the spectra given are not this window's ({given.n_samples} samples at "
+                        f"{given.fs_hz:g} Hz; the window: {y.shape[0]} at {fs:g} Hz, band "
+                        f"{band[0]:g}-{band[1]:g} Hz)")
+    return given
 
 
 def _noise_free(warm: FullRefinement | None, power: np.ndarray) -> bool:

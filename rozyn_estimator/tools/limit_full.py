@@ -1,0 +1,133 @@
+"""``rozyn trial --model full --limit``: the full car's estimate in the limit of infinite data.
+
+One fit (:func:`~rozyn_estimator.method.full.refine.refine_full`) to the periodogram matrices
+averaged over every seed's record of one condition. Averaging removes the records' sampling
+scatter but not what the model gets wrong, so the limit's departure from the truth is the
+model's own bias (a simulator and an estimator that disagree, a departure the vehicle file does
+not describe), measured with a standard error ``std / √n`` (the published std of one record at
+the limit, over the seeds) instead of the spread of ``n`` estimates: the bias of ``n`` single
+estimates mixes that with the roads' own scatter, whose standard error is the same size but
+whose mean also carries what a finite record adds. The fit starts at the truth (the limit is
+a property of the model, not of a start), and the estimator is told the vehicle without its
+tolerances: a calibration's priors would weigh as against one record's data, not the limit's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import cast
+
+import numpy as np
+
+from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.method.full import FULL_PARAM_NAMES
+from rozyn_estimator.method.full.refine import FullRefinement, refine_full
+from rozyn_estimator.method.likelihood.spectra import Spectra, window_spectra
+from rozyn_estimator.tools.trial import parallel_map, parse_seeds
+from rozyn_estimator.tools.trial_full import LABELS, FullTrialSpec, simulate_full, spec_from_args
+from rozyn_estimator.vehicle_full import CORNERS, FullTolerances
+
+_Z_MODEL = 3.0  # a departure beyond this many standard errors: the model's own bias
+
+
+@dataclass(frozen=True)
+class Limit:
+    """The fit to the averaged periodogram of ``n`` records."""
+
+    refinement: FullRefinement
+    truth: np.ndarray  # (5,) the simulated vehicle's (m, I_xx, I_yy, l_f, y_c)
+    n: int  # the records averaged
+
+    @property
+    def standard_error(self) -> np.ndarray:
+        """(5,) the limit's standard error: one record's published std over √n."""
+        cov = self.refinement.covariance
+        return np.full(5, np.nan) if cov is None else np.sqrt(np.diag(cov) / self.n)
+
+    def to_dict(self) -> dict[str, object]:
+        """The JSON record of ``--limit --json``: per parameter (FULL_PARAM_NAMES) in SI units."""
+        def named(values: np.ndarray) -> dict[str, float | None]:
+            return {k: float(x) if np.isfinite(x) else None
+                    for k, x in zip(FULL_PARAM_NAMES, values, strict=True)}
+
+        ref = self.refinement
+        return {"model": "full", "limit": True, "n_records": self.n, "status": ref.status,
+                "reason": ref.reason,
+                "truth": named(self.truth), "params": named(self.truth + self.departure),
+                "departure": named(self.departure), "standard_error": named(self.standard_error)}
+
+    @property
+    def departure(self) -> np.ndarray:
+        """(5,) the limit minus the truth (NaN when the fit failed)."""
+        p = self.refinement.params
+        return np.full(5, np.nan) if p is None else p - self.truth
+
+
+def record_spectra(item: tuple[FullTrialSpec, int]) -> tuple[Spectra, np.ndarray, tuple[int, ...]]:
+    """One seed's record: (its spectra in the refinement's band, its speed per sample [m/s],
+    the channels' corners)."""
+    spec, seed = item
+    accel, speed, channels, _ = simulate_full(spec, seed)
+    cfg = spec.pipeline_config().likelihood
+    fs = spec.sim.rate_hz
+    band = (cfg.band_hz[0], min(cfg.band_hz[1], cfg.max_band_nyquist * fs / 2.0))
+    return window_spectra(accel, fs, band, cfg.taper), speed, tuple(CORNERS.index(c) for c in channels)
+
+
+def infinite_data_limit(spec: FullTrialSpec, seeds: Sequence[int], jobs: int | None = None,
+                        progress: bool = False) -> Limit:
+    """The fit to the periodogram matrices averaged over ``seeds``' records of ``spec``."""
+    if not seeds:
+        raise ValueError("the limit needs at least one seed")
+    total: np.ndarray | None = None
+    for record in parallel_map(record_spectra, [(spec, s) for s in seeds], jobs, progress, "record"):
+        total = record[0].periodogram.copy() if total is None else total + record[0].periodogram
+    assert total is not None
+    last, speed, sensors = record  # the seeds' records differ in their roads and noise only
+    mean = Spectra(last.freq_hz, total / len(seeds), last.fs_hz, last.n_samples, last.window_dft, last.dft,
+                   last.first_bin)
+    window = np.zeros((last.n_samples, len(sensors)))  # its length only: the spectra are given
+    told = dataclasses.replace(spec.vehicle, tolerances=cast(FullTolerances, FullTolerances.none()))
+    ref = refine_full(window, last.fs_hz, told, sensors, spec.truth, speed,
+                      spec.pipeline_config().likelihood, spectra=mean)
+    return Limit(ref, spec.truth, len(seeds))
+
+
+def format_limit(spec: FullTrialSpec, limit: Limit) -> str:
+    """The readable report: per parameter the truth, the limit, its departure and standard error."""
+    s = spec.sim
+    lines = [f"full car, infinite-data limit: {s.road.kind} class {s.road.road_class} ({s.road.amplitudes}), "
+             f"{s.speed_kmh:g} km/h, {s.duration_s:g} s records at {s.rate_hz:g} Hz, the periodogram "
+             f"averaged over {limit.n} seed(s)", ""]
+    ref = limit.refinement
+    if not ref.ok:
+        return "\n".join([*lines, f"the fit failed: {ref.reason}"])
+    se, dep, params = limit.standard_error, limit.departure, limit.truth + limit.departure
+    lines.append(f"{'parameter':<26}{'truth':>10}{'limit':>13}{'departure':>12}{'std error':>11}{'z':>7}")
+    for i, label in enumerate(LABELS):
+        lateral = i == 4
+        shown = f"{1e3 * dep[i]:+.2f} mm" if lateral else f"{100 * dep[i] / limit.truth[i]:+.3f} %"
+        error = f"{1e3 * se[i]:.2f} mm" if lateral else f"{100 * se[i] / limit.truth[i]:.3f} %"
+        lines.append(f"{label:<26}{limit.truth[i]:>10.4g}{params[i]:>13.6g}{shown:>12}{error:>11}"
+                     f"{dep[i] / se[i]:>+7.1f}")
+    beyond = [label.split(" [")[0] for i, label in enumerate(LABELS) if abs(dep[i]) > _Z_MODEL * se[i]]
+    lines += ["", f"the model's own bias: {', '.join(beyond)} (beyond {_Z_MODEL:g} standard errors)" if beyond
+              else f"no departure beyond {_Z_MODEL:g} standard errors: what single estimates' means show "
+                   "beyond this is the records' own scatter"]
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    """``rozyn trial --model full --limit``."""
+    spec = spec_from_args(args)
+    if spec.method != "likelihood":
+        raise ConfigError("--limit: the likelihood refinement's limit (--method likelihood)")
+    seeds = parse_seeds(args.seeds if args.seeds is not None else str(args.seed))
+    limit = infinite_data_limit(spec, seeds, args.jobs, not args.quiet and sys.stderr.isatty())
+    print(json.dumps(limit.to_dict()) if args.json else format_limit(spec, limit))
+    return 0 if limit.refinement.ok else 1
