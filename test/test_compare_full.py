@@ -78,17 +78,37 @@ def test_what_the_full_car_cannot_compare_is_refused(argv, message, capsys):
     assert message in capsys.readouterr().err
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("preset", ["table5-1", "second"])
-def test_acceptance_100_seeds(preset):
-    """Issue 13's acceptance: every case's bias, 95 % coverage and failures within the bars."""
+def _missed_acceptance(preset: str, seeds: range) -> dict[str, object]:
+    """Each acceptance case's bars missed on ``seeds`` (empty: all met)."""
     missed = {}
     for case in acceptance_cases(FULL_PRESETS[preset]):
-        results = compare_full(case.spec, ["likelihood"], range(1, 101))
+        results = compare_full(case.spec, ["likelihood"], seeds)
         s = summarise_full(results["likelihood"], case.spec.truth)
         assert case.bars is not None
         if s.missed(case.bars):
             missed[case.label] = s.missed(case.bars)
+    return missed
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("preset", [
+    pytest.param("table5-1", marks=pytest.mark.xfail(strict=True, reason=(
+        "seeds 1-100 at 100 km/h: I_xx +0.51 % (standard error 0.23 %; +0.08 +- 0.07 % on 1000 roads) "
+        "and the mass's coverage 99 %: what 100 roads can give (README, the 1000-seed table)"))),
+    "second"])
+def test_acceptance_100_seeds(preset):
+    """Issue 13's acceptance as stated: every case's bias, 95 % coverage and failures within the
+    bars on seeds 1-100."""
+    missed = _missed_acceptance(preset, range(1, 101))
+    assert not missed, missed
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("preset", ["table5-1", "second"])
+def test_acceptance_1000_seeds(preset):
+    """The same bars on 1000 roads, whose standard errors (I_xx's 0.07 % at 100 km/h) resolve
+    them: a bias or a std that is off shows here, not the roads' scatter (7 minutes a car)."""
+    missed = _missed_acceptance(preset, range(1, 1001))
     assert not missed, missed
 
 
