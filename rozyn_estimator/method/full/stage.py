@@ -61,6 +61,7 @@ class FullEstimate:
     stage: str = "rozyn"  # whose estimate this is: "rozyn" or "likelihood"
     rozyn: FullEstimate | None = None  # with a refinement: Rozyn's own estimate (its start)
     refinement: FullRefinement | None = None  # the likelihood refinement, when one ran
+    glitches: tuple[int, ...] | None = None  # samples gated as glitches per channel (None: not checked)
 
     @property
     def ok(self) -> bool:
@@ -120,10 +121,23 @@ def estimate_full(
         return _refined(accel_mps2, fs_hz, vehicle, cfg, speed_mps, sensors, warm)
     started = time.perf_counter()
     accel = np.asarray(accel_mps2)
-    n = int(accel.shape[0]) if accel.ndim >= 1 else 0
     try:
         index = _sensor_indices(sensors)
-        y, _ = checked_window(accel, fs_hz, cfg, tuple(sensors))
+        y, gated = checked_window(accel, fs_hz, cfg, tuple(sensors))
+    except InputError as exc:
+        return FullEstimate(status="failed", reason=str(exc), sensors=tuple(sensors),
+                            n_samples=int(accel.shape[0]) if accel.ndim else 0,
+                            elapsed_ms=(time.perf_counter() - started) * 1e3)
+    return dataclasses.replace(_rozyn_stage(y, fs_hz, vehicle, cfg, speed_mps, sensors, index, started),
+                               glitches=gated)
+
+
+def _rozyn_stage(y: np.ndarray, fs_hz: float, vehicle: FullVehicle, cfg: PipelineConfig,
+                 speed_mps: float | np.ndarray | None, sensors: Sequence[str], index: tuple[int, ...],
+                 started: float) -> FullEstimate:
+    """Rozyn's stage on the checked, demeaned window ``y`` (:func:`checked_window`)."""
+    n = int(y.shape[0])
+    try:
         params, cov, modes, notes = _identify(y, fs_hz, vehicle, cfg, _mean_speed(speed_mps), index)
     except (InputError, IdentificationError, np.linalg.LinAlgError) as exc:
         return FullEstimate(status="failed", reason=str(exc), n_samples=n, sensors=tuple(sensors),
@@ -146,14 +160,14 @@ def _refined(
     started = time.perf_counter()
     try:
         index = _sensor_indices(sensors)
-        y, _ = checked_window(np.asarray(accel_mps2), fs_hz, cfg, tuple(sensors))
+        y, gated = checked_window(np.asarray(accel_mps2), fs_hz, cfg, tuple(sensors))
     except InputError as exc:  # bad input: neither stage can use it
         return FullEstimate(status="failed", reason=str(exc), sensors=tuple(sensors),
                             n_samples=int(np.shape(accel_mps2)[0]) if np.ndim(accel_mps2) else 0,
                             elapsed_ms=(time.perf_counter() - started) * 1e3)
     rozyn_cfg = dataclasses.replace(cfg, refine="none")
     quick_cfg = dataclasses.replace(rozyn_cfg, variance="none")
-    quick = estimate_full(y, fs_hz, vehicle, quick_cfg, speed_mps, sensors)
+    quick = _rozyn_stage(y, fs_hz, vehicle, quick_cfg, speed_mps, sensors, index, time.perf_counter())
     ref = refine_full(y, fs_hz, vehicle, index, quick.params, 0.0 if speed_mps is None else speed_mps,
                       cfg.likelihood, warm=warm.refinement if warm is not None else None)
     if ref.ok and ref.params is not None and ref.covariance is not None:
@@ -165,11 +179,11 @@ def _refined(
                             covariance=ref.covariance if budget is None else budget.total, modes=quick.modes,
                             sensors=tuple(sensors), n_samples=quick.n_samples,
                             notes=check + ref.notes + quick.notes,
-                            budget=budget, stage="likelihood", rozyn=quick, refinement=ref,
+                            budget=budget, stage="likelihood", rozyn=quick, refinement=ref, glitches=gated,
                             elapsed_ms=(time.perf_counter() - started) * 1e3)
-    rozyn = estimate_full(accel_mps2, fs_hz, vehicle, rozyn_cfg, speed_mps, sensors)
+    rozyn = _rozyn_stage(y, fs_hz, vehicle, rozyn_cfg, speed_mps, sensors, index, time.perf_counter())
     note = f"likelihood refinement failed ({ref.reason}); publishing the Rozyn estimate"
-    return dataclasses.replace(rozyn, rozyn=quick, refinement=ref, notes=(note, *rozyn.notes),
+    return dataclasses.replace(rozyn, rozyn=quick, refinement=ref, notes=(note, *rozyn.notes), glitches=gated,
                                elapsed_ms=(time.perf_counter() - started) * 1e3)
 
 
