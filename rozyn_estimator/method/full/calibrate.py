@@ -133,7 +133,7 @@ def calibrate_vehicle(
     value, grad = posterior.evaluate(point)
     if not math.isfinite(value):
         raise ValueError("the calibration: the posterior is not finite at the fit's optimum")
-    info = _information(posterior, point)
+    info = posterior.information(point)
     inv = np.linalg.inv(ridged(info) + np.diag(precision))
     step = -inv @ grad
     converged = True
@@ -145,7 +145,7 @@ def calibrate_vehicle(
         # the corner values act on S nonlinearly (a tyre's damping moves by tens of %): a
         # second step, from the first's information (Newton's convergence leaves ~remaining²)
         _, grad = posterior.evaluate(point)
-        info = _information(posterior, point)
+        info = posterior.information(point)
         second = point - np.linalg.solve(posterior.hess(point), grad)
         point = second if _shares_valid(model, second) else point
     elif not near or remaining >= _SECOND_STEP:
@@ -154,7 +154,7 @@ def calibrate_vehicle(
         found = scoring(posterior, point if near else backtracked(posterior.fun, point, step, value),
                         _CONVERGED, max_iter)
         point, converged = found.x, bool(found.get("success")) or posterior.decrement(found.x) < _CONVERGED
-        info = _information(posterior, point)
+        info = posterior.information(point)
     contributions, posterior_std = _contributions(info, model, point, precision[n:], base.sensors)
     fitted = point[n:]
     calibrations = tuple(Calibration(*_reported(name, base.sensors, float(x), float(sd), float(tol)))
@@ -192,14 +192,6 @@ def _contributions(
     names = model.names[model.calibration_slice]
     return ({_budget_name(name, sensors): per_value[:, j] for j, name in enumerate(names)},
             np.sqrt(np.clip(np.diag(M), 0.0, None)))
-
-
-def _information(posterior: FullWhittle, point: np.ndarray) -> np.ndarray:
-    """The data's information at ``point`` summed as the optimiser's Hessian, over every 3rd
-    frequency (:meth:`~.whittle.FullWhittle.sampled_rows`: smooth in frequency; as the
-    first-order budget's, within ~1 %)."""
-    rows = posterior.sampled_rows(point)
-    return rows @ rows.T
 
 
 def _tolerance_key(name: str, sensors: tuple[int, ...]) -> tuple[str, int | None]:

@@ -253,7 +253,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     params = model.physical(theta)
     if not 1e-3 * vehicle.wheelbase_m < params[3] < (1 - 1e-3) * vehicle.wheelbase_m:
         raise _FitError(f"likelihood fit: CoG at the wheelbase's end (lf = {params[3]:.4g} m)")
-    info = objective.fisher(theta)
+    info = objective.information(theta)  # as the optimiser's Hessian sums it (variances within 1 %)
     try:
         theta_cov = np.linalg.inv(info)
     except np.linalg.LinAlgError as exc:
