@@ -67,7 +67,7 @@ def intermittency_factors(objective: FullWhittle, theta: np.ndarray, combos: np.
         return np.ones(combos.shape[0])
     S, _, _ = objective.at(theta)
     road = road_itself(objective, theta)
-    A = _score_kernels(objective, theta, combos)
+    A = objective.score_kernels(theta, combos)
     counts = objective.counts
     ar, a_all = A @ road[None], A @ S[None]
     road_only = np.einsum("qkab,qkba,k->q", ar, ar, counts).real
@@ -108,13 +108,6 @@ def road_intermittency(samples: np.ndarray, noise_share: np.ndarray, taper: floa
         return 1.0
     per_channel = (m4 / 3.0 - 2.0 * eta * road - eta**2) / np.where(weights > 0, weights, 1.0)
     return float(max(1.0, np.sum(weights * per_channel) / weights.sum()))
-
-
-def _score_kernels(objective: FullWhittle, theta: np.ndarray, combos: np.ndarray) -> np.ndarray:
-    """``A = S⁻¹ (c·∂S) S⁻¹`` per direction and frequency group, (q, groups, k, k)."""
-    _, dS, linv = objective.at(theta)
-    inv = linv.conj().swapaxes(1, 2) @ linv
-    return inv @ np.tensordot(combos, dS, axes=1) @ inv
 
 
 def _band_samples(spectra: Spectra, band_dft: np.ndarray) -> np.ndarray:

@@ -63,9 +63,8 @@ def score_covariance(objective: FullWhittle, theta: np.ndarray, combos: np.ndarr
     arithmetic, but by the midpoint rule 3 % off the mass's std.)"""
     w_hat = spectra.window_dft
     reach = (w_hat.size - 1) // 2
-    S, dS, linv = objective.at(theta)
-    inv = np.conj(np.swapaxes(linv, 1, 2)) @ linv
-    A = (inv @ np.tensordot(combos, dS, axes=1) @ inv).astype(np.complex64)  # (q, groups, k, k)
+    S, _, _ = objective.at(theta)
+    A = objective.score_kernels(theta, combos).astype(np.complex64)  # (q, groups, k, k)
     group = np.repeat(np.arange(S.shape[0]), objective.counts.astype(int))  # each bin's group
     K = group.size
     starts, counts, bins = midpoint_bins(K, int(_STEP_HZ * spectra.n_samples / spectra.fs_hz))

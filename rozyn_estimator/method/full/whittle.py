@@ -61,6 +61,7 @@ class FullWhittle:
         self._hessian: np.ndarray | None = None
         self._sampled_rows: np.ndarray | None = None
         self._S_nodes: np.ndarray | None = None  # S at the model's nodes at the last evaluation
+        self._kernels: tuple[tuple[bytes, bytes], np.ndarray] | None = None  # (θ, combos), score_kernels
         self.evaluations = 0
 
     def nll(self, S: np.ndarray) -> float:
@@ -170,6 +171,17 @@ class FullWhittle:
             return np.eye(self.model.n_params)
         rows = self.rows(theta)
         return rows @ rows.T
+
+    def score_kernels(self, theta: np.ndarray, combos: np.ndarray) -> np.ndarray:
+        """``A = S⁻¹ (c·∂S) S⁻¹`` (q, K, k, k) at θ for the directions ``combos`` (q, n_params):
+        the score's kernels the sandwich (:mod:`.score`) and the intermittency's factors
+        (:mod:`.intermittency`) both sum; cached for the last θ and directions."""
+        key = (np.asarray(theta, dtype=float).tobytes(), np.asarray(combos, dtype=float).tobytes())
+        if self._kernels is None or self._kernels[0] != key:
+            _, dS, linv = self.at(theta)
+            inv = herm(linv) @ linv
+            self._kernels = (key, inv @ np.tensordot(combos, dS, axes=1) @ inv)
+        return self._kernels[1]
 
     def information(self, theta: np.ndarray) -> np.ndarray:
         """The data's Fisher information at θ as the optimiser's Hessian sums it, over every
