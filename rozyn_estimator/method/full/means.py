@@ -32,7 +32,7 @@ def grouped(freq_hz: np.ndarray, periodogram: np.ndarray, step: int) -> tuple[np
 
 
 def coarse_fit(spectra: Spectra, n: int, model: FullCarSpectrum,
-                cfg: LikelihoodConfig) -> Callable[[np.ndarray], np.ndarray]:
+               cfg: LikelihoodConfig) -> Callable[[np.ndarray], np.ndarray]:
     """θ → a cold start's fit on coarser means (``_COARSE_HZ``), to ``_COARSE_TOL``: far
     from the optimum a Newton step needs only the likelihood's broad shape, at a fraction of
     the work; the fine fit then takes a step or two. θ itself where that fit fails."""

@@ -172,7 +172,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         raise _FitError(f"too few frequencies in {band[0]:g}-{band[1]:g} Hz")
     power = band_power(spectra)
     freq, periodogram, counts = grouped(spectra.freq_hz, spectra.periodogram,
-                                         max(1, int(GROUP_HZ * y.shape[0] / fs + 1e-9)))
+                                        max(1, int(GROUP_HZ * y.shape[0] / fs + 1e-9)))
     kernel = kernel_m2(y.shape[0], fs, cfg.taper, counts)
     groups = sensor_groups(vehicle, sensors) if cfg.self_calibrate else ()
     corners = corner_keys(vehicle) if cfg.self_calibrate else ()
