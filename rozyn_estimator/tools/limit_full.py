@@ -75,8 +75,8 @@ def record_spectra(item: tuple[FullTrialSpec, int]) -> tuple[Spectra, np.ndarray
     accel, speed, channels, _ = simulate_full(spec, seed)
     cfg = spec.pipeline_config().likelihood
     fs = spec.sim.rate_hz
-    band = (cfg.band_hz[0], min(cfg.band_hz[1], cfg.max_band_nyquist * fs / 2.0))
-    return window_spectra(accel, fs, band, cfg.taper), speed, tuple(CORNERS.index(c) for c in channels)
+    sensors = tuple(CORNERS.index(c) for c in channels)
+    return window_spectra(accel, fs, cfg.band_at(fs), cfg.taper), speed, sensors
 
 
 def infinite_data_limit(spec: FullTrialSpec, seeds: Sequence[int], jobs: int | None = None,

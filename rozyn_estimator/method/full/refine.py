@@ -161,7 +161,7 @@ def refine_full(
 def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, ...],
             start: np.ndarray | None, speed: float | np.ndarray, cfg: LikelihoodConfig,
             warm: FullRefinement | None, given: Spectra | None = None) -> FullRefinement:
-    band = (cfg.band_hz[0], min(cfg.band_hz[1], cfg.max_band_nyquist * fs / 2.0))
+    band = cfg.band_at(fs)
     v = np.atleast_1d(np.asarray(speed, dtype=float))
     if not (v.size and np.all(np.isfinite(v)) and np.all(v > 0)):
         raise _FitError("likelihood fit needs a positive speed")

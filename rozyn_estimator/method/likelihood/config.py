@@ -62,3 +62,8 @@ class LikelihoodConfig:
             ("band_hz", lambda c: c.band_hz[0] < c.band_hz[1], "needs 0 < min < max"),
             ("noise_start", lambda c: c.noise_start < 1.0, "must lie in (0, 1)"),
         ))
+
+    def band_at(self, fs_hz: float) -> tuple[float, float]:
+        """The fit's band [Hz] at the sample rate ``fs_hz``: ``band_hz``, its top at most
+        ``max_band_nyquist`` of the Nyquist frequency."""
+        return self.band_hz[0], min(self.band_hz[1], self.max_band_nyquist * fs_hz / 2.0)

@@ -167,7 +167,7 @@ def _refine(
     y: np.ndarray, fs: float, vehicle: Vehicle, start: np.ndarray | None, start_std: StartStd,
     speed: float | np.ndarray, cfg: LikelihoodConfig, warm: Refinement | np.ndarray | None,
 ) -> Refinement:
-    band = (cfg.band_hz[0], min(cfg.band_hz[1], cfg.max_band_nyquist * fs / 2.0))
+    band = cfg.band_at(fs)
     v = np.atleast_1d(np.asarray(speed, dtype=float))
     if not (np.all(np.isfinite(v)) and np.all(v > 0)):
         return Refinement(status="failed", reason="likelihood fit needs a positive speed")
