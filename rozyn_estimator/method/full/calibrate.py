@@ -43,6 +43,10 @@ from rozyn_estimator.method.likelihood.calibration import Calibration
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
 
 _FAR = 3.0  # a step longer than this many posterior std: beyond the linear range
+# a cold fit's Newton decrement at which it may hand over to the calibration: every combination
+# of its parameters is then within _FAR std of its optimum, the one-step estimator's range (a fine
+# fit's step or two saved; the estimates within 0.07 std of the posterior's mode, as before)
+HANDOFF = _FAR**2
 _CONVERGED = 0.01  # Newton decrement at which the optimiser has found the mode
 _SECOND_STEP = 1.0  # after the first step, a decrement below this takes one more step, above it scoring
 _KEEP_MOVE = 0.01  # a warm update takes the calibration over while ln m, ln I, logit l_f, y_c [m] move less

@@ -28,7 +28,8 @@ Sensors and corners: where the vehicle's tolerances allow and ``self_calibrate``
 sensor's gain and position, the rear sensors' delay and each axle's springs, dampers, tyres
 and unsprung masses (and bars) are then calibrated (:mod:`.calibrate`, :mod:`.corners`: the
 augmented posterior's mode; a warm update takes the previous window's over) and the model
-assumes them from there on; a cold fit stops at ``tol_calibrated``, the step completes it.
+assumes them from there on; a cold fit stops once within the calibration's one-step range
+(:data:`.calibrate.HANDOFF`: its Newton steps on the augmented posterior complete the fit too).
 Where the model check fails, the corners' first-order budget stands in for their calibration's.
 
 Covariance: the sandwich ``F⁻¹ Cov(∇ℓ) F⁻¹`` of the inverse Fisher information (the
@@ -54,7 +55,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import OptimizeResult
 
-from rozyn_estimator.method.full.calibrate import VehicleCalibration, calibrate_vehicle, sensor_groups
+from rozyn_estimator.method.full.calibrate import (
+    HANDOFF,
+    VehicleCalibration,
+    calibrate_vehicle,
+    sensor_groups,
+)
 from rozyn_estimator.method.full.corners import corner_keys
 from rozyn_estimator.method.full.fitcheck import full_model_fit
 from rozyn_estimator.method.full.intermittency import variance_factors
@@ -190,13 +196,14 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     iterations = starts = 0
 
     ahead = coarse_fit(spectra, y.shape[0], model, cfg)
-    # a calibration's step completes the fit (as the half car's: the estimates move by < 0.01 std)
+    # a cold fit hands over to the calibration's Newton steps once within their range
     calibrating = bool(groups or corners)
-    fit_cfg = dataclasses.replace(cfg, tol=cfg.tol_calibrated) if calibrating and assumed is None else cfg
+    fit_cfg = dataclasses.replace(cfg, tol=max(cfg.tol, HANDOFF)) if calibrating and assumed is None else cfg
 
-    def run(theta0: np.ndarray, max_iter: int, cold: bool = False) -> None:
+    def run(theta0: np.ndarray, max_iter: int, cold: bool = False, tol: float | None = None) -> None:
         nonlocal best, iterations, starts
-        res = scoring(objective, ahead(theta0) if cold else theta0, fit_cfg.tol, max_iter)
+        res = scoring(objective, ahead(theta0) if cold else theta0, fit_cfg.tol if tol is None else tol,
+                      max_iter)
         iterations, starts = iterations + int(res.nit), starts + 1
         if np.isfinite(res.fun) and (best is None or res.fun < best.fun):
             best = res
@@ -240,6 +247,8 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
                                                    corners)
         except (ValueError, np.linalg.LinAlgError) as exc:  # the first-order budget stands for them
             notes.append(f"calibration failed ({exc}): the tolerances' first-order budget stands")
+            run(theta, max(1, cfg.max_iter - iterations), tol=cfg.tol)  # the fit, completed without it
+            theta = best.x
         else:
             model.assume_sensors(calibration.values)
             model.set_vehicle(calibration.vehicle(vehicle))
