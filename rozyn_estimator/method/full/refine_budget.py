@@ -49,7 +49,7 @@ def refinement_contributions(objective: FullWhittle, theta: np.ndarray, theta_co
     """Contributions ``c_j`` (5,) of each toleranced value of ``vehicle`` to the refined estimate
     (but those of the tolerance keys in ``skip``: the calibrated sensors')."""
     model = objective.model
-    _, _, linv = objective.at(theta)
+    _, linv = objective.factored(theta)
     S = objective.node_spectrum(theta)
     jac = model.physical_jacobian(theta)
     moves = [(name, step, move(step), tol) for key, tol in vehicle.tolerances.to_dict().items()

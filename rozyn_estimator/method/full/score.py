@@ -63,7 +63,7 @@ def score_covariance(objective: FullWhittle, theta: np.ndarray, combos: np.ndarr
     arithmetic, but by the midpoint rule 3 % off the mass's std.)"""
     w_hat = spectra.window_dft
     reach = (w_hat.size - 1) // 2
-    S, _, _ = objective.at(theta)
+    S, _ = objective.factored(theta)
     A = objective.score_kernels(theta, combos).astype(np.complex64)  # (q, groups, k, k)
     group = np.repeat(np.arange(S.shape[0]), objective.counts.astype(int))  # each bin's group
     K = group.size

@@ -92,7 +92,7 @@ class FullWhittle:
 
     def evaluated(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(S, dS/dθ) at θ's nodes (raises ValueError where S is not positive definite)."""
-        self.at(theta)
+        self.factored(theta)
         assert self._S_nodes is not None and self._state is not None
         return self._S_nodes, self._state[1]
 
@@ -134,15 +134,22 @@ class FullWhittle:
         assert self._S_nodes is not None
         return self._S_nodes
 
-    def at(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(S, dS/dθ, L⁻¹) at θ and the periodograms' frequencies (raises ValueError where S is
-        not positive definite)."""
+    def factored(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(S, L⁻¹) at θ and the periodograms' frequencies (raises ValueError where S is not
+        positive definite)."""
         self.evaluate(theta)
         if self._state is None:
             raise ValueError("the model is not positive definite at θ")
-        S, dS_nodes, linv = self._state
+        return self._state[0], self._state[2]
+
+    def at(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(S, dS/dθ, L⁻¹) at θ and the periodograms' frequencies (raises ValueError where S is
+        not positive definite); dS mapped from the nodes once asked (every parameter's: the
+        costliest map there is; :meth:`factored` where S and L⁻¹ suffice)."""
+        S, linv = self.factored(theta)
         if self._dS is None:
-            self._dS = self.model.to_targets(dS_nodes)
+            assert self._state is not None
+            self._dS = self.model.to_targets(self._state[1])
         return S, self._dS, linv
 
     def whitened(self, linv: np.ndarray, dS: np.ndarray, root_counts: np.ndarray | None = None) -> np.ndarray:
@@ -178,9 +185,12 @@ class FullWhittle:
         (:mod:`.intermittency`) both sum; cached for the last θ and directions."""
         key = (np.asarray(theta, dtype=float).tobytes(), np.asarray(combos, dtype=float).tobytes())
         if self._kernels is None or self._kernels[0] != key:
-            _, dS, linv = self.at(theta)
+            _, linv = self.factored(theta)
+            assert self._state is not None
             inv = herm(linv) @ linv
-            self._kernels = (key, inv @ np.tensordot(combos, dS, axes=1) @ inv)
+            # the map to the frequencies is linear: the q directions mapped, not every parameter
+            dS = self.model.to_targets(np.tensordot(combos, self._state[1], axes=1))
+            self._kernels = (key, inv @ dS @ inv)
         return self._kernels[1]
 
     def information(self, theta: np.ndarray) -> np.ndarray:
