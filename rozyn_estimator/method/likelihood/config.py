@@ -47,7 +47,9 @@ class LikelihoodConfig:
     tol: float = param(1e-3, "convergence: Newton decrement below this (ℓ within half of it of the optimum)",
                        low=0.0, open_low=True)
     tol_calibrated: float = param(0.05, "convergence when the calibration's Newton step follows (it "
-                                  "completes the fit's: measured, the estimates move by < 0.003 std)",
+                                  "completes the fit's: measured, the estimates move by < 0.003 std; "
+                                  "the full car's cold fit hands over earlier, within the calibration's "
+                                  "one-step range, and its result is held to this)",
                                   low=0.0, open_low=True)
     noise_start: float = param(1e-3, "the starts' noise floors, share of each channel's band power",
                                low=0.0, open_low=True, high=1.0)
