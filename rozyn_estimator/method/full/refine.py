@@ -13,7 +13,8 @@ grid and interpolated (:mod:`.grid`; ``grid_hz``; at every frequency once a nois
 to zero, where S is nearly singular), the optimiser's Hessian sums over every 3rd frequency
 (:mod:`.whittle`), and a cold start is first fitted to means over 0.1 Hz (:func:`.means.coarse_fit`:
 far from the optimum the likelihood's broad shape suffices), which leaves the fine fit a
-step or two. The estimates stay within 0.05 of their std of the exact computation's (tested).
+step or two (often none where the calibration follows: it completes the fit). The
+estimates stay within 0.05 of their std of the exact computation's (tested).
 
 Starts: the previous window's optimum when there is one (warm), else Rozyn's estimate,
 for at most 25 iterations; when that gives no finite likelihood, explains a channel as
