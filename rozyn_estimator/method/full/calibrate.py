@@ -151,7 +151,7 @@ def calibrate_vehicle(
         # chord method's, with the first step's derivatives, left the estimates 0.35 std off)
         _, grad = posterior.evaluate(point)
         info = posterior.information(point)
-        second = point - np.linalg.solve(posterior.hess(point), grad)
+        second = point - np.linalg.solve(ridged(info) + np.diag(precision), grad)  # as the first step's
         point = second if _shares_valid(model, second) else point
     elif not near or remaining >= _SECOND_STEP:
         # far off: the nuisances that absorbed the departure (a noise floor) must move back, or
