@@ -1,4 +1,4 @@
-"""The full car's sensors calibrated by the data (method/full/calibrate.py, sensing.py): the
+"""The full car's sensors calibrated by the data (method/full/uncertainty/calibrate.py, sensing.py): the
 model's derivatives by the sensors' values, the copy that calibrates, and what it is for —
 an uncertainty that is neither 10x too large on quiet data nor too small when a gain is off."""
 
@@ -9,11 +9,12 @@ import dataclasses
 import numpy as np
 import pytest
 
-from rozyn_estimator.method.full import FullEstimate, calibrate, estimate_full, refine
-from rozyn_estimator.method.full.calibrate import VehicleCalibration, sensor_groups
-from rozyn_estimator.method.full.corners import CornerCalibrating, corner_keys
+from rozyn_estimator.method.full import FullEstimate, estimate_full, refine
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
-from rozyn_estimator.method.likelihood.calibration import Calibration
+from rozyn_estimator.method.full.uncertainty import calibrate
+from rozyn_estimator.method.full.uncertainty.calibrate import VehicleCalibration, sensor_groups
+from rozyn_estimator.method.full.uncertainty.corners import CornerCalibrating, corner_keys
+from rozyn_estimator.method.likelihood.uncertainty.calibration import Calibration
 from rozyn_estimator.method.pipeline import PipelineConfig
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle

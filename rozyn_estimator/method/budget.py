@@ -7,7 +7,7 @@ Every assumed value ``β_j`` with a tolerance ``u_j`` (a standard uncertainty, s
 when it is one standard uncertainty off; the systematic covariance is ``Σ_j c_j c_jᵀ``
 (the values independent) and the published covariance the sum of both parts. The
 sensitivities are exact derivatives of each stage: of the refinement's optimum
-(:mod:`rozyn_estimator.method.likelihood.sensitivity`) and of Rozyn's linear fit
+(:mod:`rozyn_estimator.method.likelihood.uncertainty.sensitivity`) and of Rozyn's linear fit
 (:func:`rozyn_contributions`, central differences of the fit on the measured modes).
 Values the data calibrate themselves (the sensors' relative gain and time offset in the
 refinement) are in its statistical part instead, with their tolerance as prior.
@@ -26,7 +26,7 @@ import numpy as np
 from rozyn_estimator.method.config import PARAM_NAMES
 from rozyn_estimator.method.fit import fit_inertia
 from rozyn_estimator.method.identification import IdentificationError, Mode
-from rozyn_estimator.method.likelihood.calibration import Calibration
+from rozyn_estimator.method.likelihood.uncertainty.calibration import Calibration
 from rozyn_estimator.tolerances import RELATIVE_FIELDS
 from rozyn_estimator.vehicle import Vehicle
 

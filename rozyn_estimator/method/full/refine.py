@@ -8,7 +8,7 @@ parameters; the road's intensity, waviness and shape; the tracks' coherence scal
 floor per sensor) by scipy's trust-region method with the analytic gradient and the Fisher
 information as its Hessian (scoring), until the Newton decrement is below ``tol``.
 
-Work (issue 13: one update within 3x the half car's): the model is evaluated on a 0.05 Hz
+Work (one update within 3x the half car's): the model is evaluated on a 0.05 Hz
 grid and interpolated (:mod:`.grid`; ``grid_hz``; at every frequency once a noise floor runs
 to zero, where S is nearly singular), the optimiser's Hessian sums over every 3rd frequency
 (:mod:`.whittle`), and a cold start is first fitted to means over 0.1 Hz (:func:`.means.coarse_fit`:
@@ -27,10 +27,11 @@ mostly noise is refused.
 
 Sensors and corners: where the vehicle's tolerances allow and ``self_calibrate`` is on, each
 sensor's gain and position, the rear sensors' delay and each axle's springs, dampers, tyres
-and unsprung masses (and bars) are then calibrated (:mod:`.calibrate`, :mod:`.corners`: the
-augmented posterior's mode; a warm update takes the previous window's over) and the model
-assumes them from there on; a cold fit stops once within the calibration's one-step range
-(:data:`.calibrate.HANDOFF`: its Newton steps on the augmented posterior complete the fit too).
+and unsprung masses (and bars) are then calibrated (:mod:`.uncertainty.calibrate`,
+:mod:`.uncertainty.corners`: the augmented posterior's mode; a warm update takes the previous
+window's over) and the model assumes them from there on; a cold fit stops once within the
+calibration's one-step range (:data:`.uncertainty.calibrate.HANDOFF`: its Newton steps on the
+augmented posterior complete the fit too).
 Where the model check fails, the corners' first-order budget stands in for their calibration's.
 
 Covariance: the sandwich ``F⁻¹ Cov(∇ℓ) F⁻¹`` of the inverse Fisher information (the
@@ -40,8 +41,8 @@ Fisher information while the window's length stays and its body parameters move 
 than 1 %), mapped to the physical parameters, and raised where the road is not stationary
 (:mod:`.intermittency`: by the road's intermittency, where the road's own part
 carries the information). What
-the vehicle's tolerances add comes from :mod:`.refine_budget` (a warm update keeps the previous window's
-while its body parameters moved by less than 1 % (1 cm for the lateral CoG): the
+the vehicle's tolerances add comes from :mod:`.uncertainty.refine_budget` (a warm update keeps the
+previous window's while its body parameters moved by less than 1 % (1 cm for the lateral CoG): the
 contributions are sensitivities of the model at θ).
 """
 
@@ -56,19 +57,19 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import OptimizeResult
 
-from rozyn_estimator.method.full.calibrate import (
+from rozyn_estimator.method.full.fitcheck import full_model_fit
+from rozyn_estimator.method.full.intermittency import variance_factors
+from rozyn_estimator.method.full.means import GROUP_HZ, coarse_fit, grouped, kernel_m2
+from rozyn_estimator.method.full.score import sandwich_ratio
+from rozyn_estimator.method.full.spectrum import BODY_NAMES, FullCarSpectrum
+from rozyn_estimator.method.full.uncertainty.calibrate import (
     HANDOFF,
     VehicleCalibration,
     calibrate_vehicle,
     sensor_groups,
 )
-from rozyn_estimator.method.full.corners import corner_keys
-from rozyn_estimator.method.full.fitcheck import full_model_fit
-from rozyn_estimator.method.full.intermittency import variance_factors
-from rozyn_estimator.method.full.means import GROUP_HZ, coarse_fit, grouped, kernel_m2
-from rozyn_estimator.method.full.refine_budget import refinement_contributions
-from rozyn_estimator.method.full.score import sandwich_ratio
-from rozyn_estimator.method.full.spectrum import BODY_NAMES, FullCarSpectrum
+from rozyn_estimator.method.full.uncertainty.corners import corner_keys
+from rozyn_estimator.method.full.uncertainty.refine_budget import refinement_contributions
 from rozyn_estimator.method.full.whittle import FullWhittle, ridged, scoring
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.covariance import NOISE_AT_ZERO
@@ -151,7 +152,7 @@ def refine_full(
         warm: the previous window's refinement (its θ is the first start).
         spectra: the window's spectra (:func:`window_spectra` of ``accel_mps2`` with the
             config's band and taper) when given, e.g. the periodogram averaged over many records
-            of one condition: the fit's infinite-data limit (:mod:`rozyn_estimator.tools.limit_full`).
+            of one condition: the fit's infinite-data limit (:mod:`rozyn_estimator.tools.trial.limit`).
     """
     cfg = config or LikelihoodConfig()
     started = time.perf_counter()
@@ -306,7 +307,7 @@ def _contributions(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndar
                    calibration: VehicleCalibration | None,
                    misfit: bool = False) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
     """The tolerances' contributions and the θ they were taken at: the calibrated sensors'
-    (:mod:`.calibrate`) and the first-order budget's of the other values, the previous window's
+    (:mod:`.uncertainty.calibrate`) and the first-order budget's of the other values, the previous window's
     when its body parameters were within ``_BUDGET_MOVE`` of these (the contributions are the
     model's sensitivities at θ, not the data's: they change by about as much as θ does)."""
     if not vehicle.tolerances.any:

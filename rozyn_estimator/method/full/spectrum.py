@@ -42,9 +42,9 @@ import numpy as np
 from numpy.polynomial import legendre
 from scipy import sparse, special
 
-from rozyn_estimator.method.full import sensing as sensor_model
 from rozyn_estimator.method.full.fit import corner_matrices, corner_response_derivatives
 from rozyn_estimator.method.full.grid import ALIAS_SPACING_HZ, alias_map, apply, evaluation_map
+from rozyn_estimator.method.full.uncertainty import sensing as sensor_model
 from rozyn_estimator.method.likelihood.road_input import delay_characteristic, spatial_band
 from rozyn_estimator.vehicle_full import FullVehicle
 

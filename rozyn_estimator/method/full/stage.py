@@ -6,7 +6,7 @@ multi-reference correlation functions of every channel pair (section 2-1), the s
 transition matrix's modes (2-2, 2-3), the three body modes (heave, pitch, roll) by the
 frequency and damping bands and their amplitude, the linear fit of
 :mod:`rozyn_estimator.method.full.fit`, the delete-one-block jackknife, and the tolerances'
-contributions (:mod:`rozyn_estimator.method.full.budget`): the published covariance is the
+contributions (:mod:`rozyn_estimator.method.full.uncertainty.budget`): the published covariance is the
 jackknife's plus theirs.
 
 With ``refine="likelihood"`` (the pipeline's default) the likelihood refinement of the full
@@ -32,9 +32,9 @@ import numpy as np
 
 from rozyn_estimator.method.config import PipelineConfig
 from rozyn_estimator.method.correlation import correlation_sums
-from rozyn_estimator.method.full.budget import FullBudget, full_contributions
 from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES, fit_full_inertia
 from rozyn_estimator.method.full.refine import FullRefinement, refine_full
+from rozyn_estimator.method.full.uncertainty.budget import FullBudget, full_contributions
 from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
 from rozyn_estimator.method.pipeline import InputError, checked_window, lag_range
 from rozyn_estimator.method.variance import jackknife_covariance

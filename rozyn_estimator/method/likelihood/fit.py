@@ -39,8 +39,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rozyn_estimator.method.likelihood.augment import plan
-from rozyn_estimator.method.likelihood.calibration import Calibration
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.covariance import NOISE_AT_ZERO, CovarianceError, kept
 from rozyn_estimator.method.likelihood.fitcheck import ModelFit, model_fit
@@ -48,9 +46,11 @@ from rozyn_estimator.method.likelihood.model import CORNERS, HalfCarSpectrum
 from rozyn_estimator.method.likelihood.newton import Fits, noise_share
 from rozyn_estimator.method.likelihood.objective import WhittleObjective
 from rozyn_estimator.method.likelihood.score import SandwichRatio
-from rozyn_estimator.method.likelihood.sensitivity import Sensitivities
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, fast_length, window_spectra
-from rozyn_estimator.method.likelihood.uncertainty import uncertainty
+from rozyn_estimator.method.likelihood.uncertainty.augment import plan
+from rozyn_estimator.method.likelihood.uncertainty.budget import uncertainty
+from rozyn_estimator.method.likelihood.uncertainty.calibration import Calibration
+from rozyn_estimator.method.likelihood.uncertainty.sensitivity import Sensitivities
 from rozyn_estimator.vehicle import Vehicle
 
 StartStd = np.ndarray | Callable[[], np.ndarray | None] | None

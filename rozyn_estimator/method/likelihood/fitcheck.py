@@ -36,8 +36,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special
 
-from rozyn_estimator.method.likelihood.calibration import Calibration
 from rozyn_estimator.method.likelihood.objective import WhittleObjective, cholesky2
+from rozyn_estimator.method.likelihood.uncertainty.calibration import Calibration
 
 N_BANDS = 8
 ALPHA = 1e-3  # a p-value below this: the model does not fit (a WARN)

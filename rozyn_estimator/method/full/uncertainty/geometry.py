@@ -2,7 +2,7 @@
 first-order budget (:mod:`.refine_budget`): one batched pass of the model's own pieces instead
 of a model evaluation per value.
 
-Where the geometry enters the model (:mod:`.spectrum`):
+Where the geometry enters the model (:mod:`..spectrum`):
 
 - the corners' positions in the body map ``B`` (the rear corners at ``x = L``, an axle's two
   at ``y = ±t/2``): ``D = Bᵀ Z B - ω² M`` and the road's input ``Bᵀ T`` move, so

@@ -11,7 +11,7 @@ and tracks :func:`~.geometry.geometry_derivatives`, each in one pass); for any o
 model's change with the value moved a small step.
 Per toleranced value: that move times its tolerance,
 mapped to ``(m, I_xx, I_yy, l_f, y_c)``. The keys follow the Rozyn stage's budget
-(:mod:`rozyn_estimator.method.full.budget`): an axle's share applies to both its corners,
+(:mod:`rozyn_estimator.method.full.uncertainty.budget`): an axle's share applies to both its corners,
 a sensor's position or gain to each sensor on its own (independent errors: one
 contribution each), the time offset to the rear sensors against the front ones.
 
@@ -19,7 +19,7 @@ Work: ``F_θβ`` is summed as the optimiser's Hessian is, over every 3rd frequen
 counting for its neighbours (:meth:`~.whittle.FullWhittle.sampled_rows`: it is smooth in
 frequency; measured within 1.3 % of the whole sum, the budget's total within 0.6 %), all
 moves whitened in one pass; a stepped move is one evaluation of S without derivatives on
-the model's evaluation grid (:mod:`.grid`). Measured: the budget of a cold update from 76 ms
+the model's evaluation grid (:mod:`..grid`). Measured: the budget of a cold update from 76 ms
 to about 20, then (the sampled sum) by a further ~10 ms, then (the geometry's derivatives
 instead of three stepped evaluations) to about 2.
 """
@@ -31,11 +31,17 @@ from collections.abc import Callable
 
 import numpy as np
 
-from rozyn_estimator.method.full.budget import ABS_STEP, AXLE, VehicleMove, moved_copy, vehicle_moves
-from rozyn_estimator.method.full.corners import values_of
 from rozyn_estimator.method.full.fit import CORNER_VALUES
-from rozyn_estimator.method.full.geometry import GEOMETRY, geometry_derivatives
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.uncertainty.budget import (
+    ABS_STEP,
+    AXLE,
+    VehicleMove,
+    moved_copy,
+    vehicle_moves,
+)
+from rozyn_estimator.method.full.uncertainty.corners import values_of
+from rozyn_estimator.method.full.uncertainty.geometry import GEOMETRY, geometry_derivatives
 from rozyn_estimator.method.full.whittle import FullWhittle
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
 

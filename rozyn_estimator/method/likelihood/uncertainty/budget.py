@@ -2,12 +2,12 @@
 
 - The values the data can calibrate (``self_calibrate``) — the sensors' relative gain and
   delay (fitted with θ), the suspension, tyres, unsprung masses and sensor positions (one
-  step of the augmented posterior, :mod:`rozyn_estimator.method.likelihood.augment`) —
+  step of the augmented posterior, :mod:`rozyn_estimator.method.likelihood.uncertainty.augment`) —
   contribute what their tolerances still contribute after the data have narrowed them:
   each prior's part of the posterior covariance.
 - The values left assumed (the wheelbase; everything when ``self_calibrate`` is off)
   contribute their sensitivity times their tolerance
-  (:mod:`rozyn_estimator.method.likelihood.sensitivity`).
+  (:mod:`rozyn_estimator.method.likelihood.uncertainty.sensitivity`).
 - The data's own part is the sandwich covariance with its time blocks
   (:mod:`rozyn_estimator.method.likelihood.covariance`).
 
@@ -20,14 +20,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rozyn_estimator.method.likelihood.augment import calibrate, plan
-from rozyn_estimator.method.likelihood.calibration import CALIBRATED, POSITION_KEYS, Calibration, calibration
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.covariance import sandwich_covariance
 from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
 from rozyn_estimator.method.likelihood.objective import WhittleObjective
 from rozyn_estimator.method.likelihood.score import SandwichRatio
-from rozyn_estimator.method.likelihood.sensitivity import Sensitivities, sensitivities_near
+from rozyn_estimator.method.likelihood.uncertainty.augment import calibrate, plan
+from rozyn_estimator.method.likelihood.uncertainty.calibration import (
+    CALIBRATED,
+    POSITION_KEYS,
+    Calibration,
+    calibration,
+)
+from rozyn_estimator.method.likelihood.uncertainty.sensitivity import Sensitivities, sensitivities_near
 from rozyn_estimator.vehicle import Vehicle
 
 

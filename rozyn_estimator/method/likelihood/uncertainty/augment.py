@@ -33,11 +33,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import OptimizeResult, minimize
 
-from rozyn_estimator.method.likelihood.calibration import CALIBRATED
-from rozyn_estimator.method.likelihood.calibration import POSITION_KEYS as POSITIONS
 from rozyn_estimator.method.likelihood.covariance import inverse_information, kept
 from rozyn_estimator.method.likelihood.model import CORNER_TERMS, CORNERS, HalfCarSpectrum
 from rozyn_estimator.method.likelihood.objective import Prior, WhittleObjective
+from rozyn_estimator.method.likelihood.uncertainty.calibration import CALIBRATED
+from rozyn_estimator.method.likelihood.uncertainty.calibration import POSITION_KEYS as POSITIONS
 from rozyn_estimator.vehicle import Vehicle
 
 _FIXED = 1e-4  # prior std of a value without a tolerance among calibrated ones (share or m)

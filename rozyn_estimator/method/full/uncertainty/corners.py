@@ -1,7 +1,7 @@
 """The full car's corner values as the data may calibrate them: each toleranced axle's springs,
 dampers, tyres and unsprung masses and each anti-roll bar, as a share of the vehicle file's
 value (as the tolerances state them and both budgets move them:
-:func:`~rozyn_estimator.method.full.budget.vehicle_moves`, an axle's share on both its
+:func:`~rozyn_estimator.method.full.uncertainty.budget.vehicle_moves`, an axle's share on both its
 corners).
 
 :class:`CornerCalibrating` adds those shares to a :class:`~.spectrum.FullCarSpectrum`'s θ
@@ -17,9 +17,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from rozyn_estimator.method.full.budget import vehicle_moves
 from rozyn_estimator.method.full.fit import CORNER_VALUES
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.uncertainty.budget import vehicle_moves
 from rozyn_estimator.vehicle_full import FullVehicle
 
 PREFIXES = ("suspension_stiffness", "suspension_damping", "tyre_stiffness", "tyre_damping", "unsprung_mass",

@@ -1,0 +1,12 @@
+"""The full car's uncertainty budget and self-calibration (internal to its estimator).
+
+- ``budget``: Rozyn's stage's budget (the linear fit repeated with each value moved);
+- ``refine_budget``: what each value left assumed contributes to the refined estimate;
+- ``calibrate``: the sensors and corner values calibrated by the data (the augmented
+  posterior), with ``sensing`` (the sensors' gains, positions, delay) and ``corners`` (each
+  axle's springs, dampers, tyres, unsprung masses, anti-roll bars) as their parameters;
+- ``geometry``: the spectrum's derivatives in the wheelbase and tracks.
+
+Nothing is re-exported: the modules import one another, and the model's own modules import
+``sensing``, so a re-export here would be an import cycle.
+"""
