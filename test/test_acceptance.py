@@ -8,7 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rozyn_estimator.tools.trial import TrialSpec, run_trials, summarise
+from rozyn_estimator.tools.trial.run import run_trials
+from rozyn_estimator.tools.trial.spec import TrialSpec
+from rozyn_estimator.tools.trial.summary import summarise
 
 from conftest import TRUTH
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from rozyn_estimator.tools import bench
+from rozyn_estimator.tools.bench import command as bench
 
 KEYS = ("sim_100s_at_100hz_ms", "road_generation_ms", "update_120s_window_ms",
         "update_120s_window_no_variance_ms", "refined_update_cold_ms", "refined_update_warm_ms",
@@ -61,7 +61,7 @@ def test_paired_timings_run_the_functions_in_turn_and_report_each_ones_median(mo
 def test_the_node_benchs_medians_over_all_updates_and_over_the_full_windows():
     """``rozyn bench --nodes`` reports the latency and the pipeline's time over every update
     and over the full windows' only (a drive's steady state), matched by the update's stamp."""
-    from rozyn_estimator.tools.node_bench import _medians
+    from rozyn_estimator.tools.bench.nodes import _medians
 
     latency = {1: 50.0, 2: 40.0, 3: 30.0, 4: 20.0}
     pipeline = {1: 45.0, 3: 25.0, 4: 15.0}  # update 2's diagnostics never arrived

@@ -83,7 +83,7 @@ def test_top_level_help_imports_no_command():
 
 def test_only_the_invoked_command_is_imported():
     loaded = _tool_modules_after(["trial", "--help"])
-    assert "rozyn_estimator.tools.trial_command" in loaded
+    assert "rozyn_estimator.tools.trial.command" in loaded
     others = {f"rozyn_estimator.tools.{m}" for m in ("compare", "study", "replay", "demo", "bench")}
     assert not others & set(loaded)
 

@@ -1,4 +1,4 @@
-"""``rozyn compare``: methods side by side on the same runs; issue 6's acceptance (slow)."""
+"""``rozyn compare``: methods side by side on the same runs; the acceptance suites (slow)."""
 
 from __future__ import annotations
 
@@ -9,10 +9,12 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.tools.cars import HALF, SECOND_VEHICLE
 from rozyn_estimator.tools.cli import main
-from rozyn_estimator.tools.compare import bar_failures, compare
-from rozyn_estimator.tools.suites import SECOND_VEHICLE, SUITES, Bars, suite
-from rozyn_estimator.tools.trial import Summary, TrialSpec, summarise
+from rozyn_estimator.tools.compare.compare import bar_failures, compare
+from rozyn_estimator.tools.compare.suites import SUITES, Bars, suite
+from rozyn_estimator.tools.trial.spec import TrialSpec
+from rozyn_estimator.tools.trial.summary import Summary, summarise
 
 QUICK = ["--seeds", "1-2", "--jobs", "1", "--duration-s", "40", "--quiet"]
 
@@ -52,7 +54,7 @@ def test_bad_options_are_one_line(capsys, args):
 
 def test_suites():
     base = TrialSpec(vehicle=SECOND_VEHICLE)
-    for name in SUITES:
+    for name in SUITES["half"]:
         cases = suite(name, base)
         assert cases and all(c.spec.vehicle.wheelbase_m == 3.2 or "sensors" in c.label for c in cases)
     acceptance = suite("acceptance", base)
@@ -69,13 +71,14 @@ def test_bar_failures_name_each_missed_bar():
         return Summary(100, failures, t, t, np.array(std), np.array(bias), np.ones(3), np.ones(3), 1.0,
                        coverage_95=np.array(coverage))
 
-    assert bar_failures(summary([0.1, -0.2, 0.0], [2.0, 5.0, 0.002], [0.95, 0.93, 0.96]), Bars()) == []
+    bars = Bars(std=(10.0, 25.0, 0.01))
+    assert bar_failures(summary([0.1, -0.2, 0.0], [2.0, 5.0, 0.002], [0.95, 0.93, 0.96]), bars, HALF) == []
     bad = summary([1.5, 0.0, 0.0], [2.0, 30.0, 0.002], [0.95, 0.93, 0.99], failures=2)
-    missed = bar_failures(bad, Bars())
-    assert missed == ["failures 2/100", "bias m +1.50 %", "std I 30", "coverage lf 0.99"]
+    missed = bar_failures(bad, bars, HALF)
+    assert missed == ["failures 2/100", "bias m +1.50 %", "std I_yy 30", "coverage l_f 0.99"]
 
 
-# Issue 6's acceptance: 100 seeds per case, Table 5-1 and a second, clearly different vehicle,
+# The refinement's acceptance: 100 seeds per case, Table 5-1 and a second, clearly different vehicle,
 # on seeds that no setting was explored on (as test_acceptance.py).
 SEEDS = range(501, 601)
 
@@ -87,14 +90,14 @@ def test_acceptance(vehicle, index):
     base = TrialSpec(vehicle=SECOND_VEHICLE) if vehicle == "second" else TrialSpec()
     case = suite("acceptance", base)[index]
     results = compare(case.spec, ["likelihood"], SEEDS, jobs=2)["likelihood"]
-    # The issue's bars hold for bias, spread and failures as they are. A coverage from 100
+    # The bars hold for bias, spread and failures as they are. A coverage from 100
     # seeds is a binomial count: even a calibrated 95 % interval lands outside the issue's
-    # 90-98 % in about one parameter-case in six by chance (docs/RESULTS.md reports the
-    # issue's bar on seeds 1-100). So here: no parameter under-covers (>= 88 %: below that a
+    # 90-98 % in about one parameter-case in six by chance (docs/results.md reports the
+    # bars on seeds 1-100). So here: no parameter under-covers (>= 88 %: below that a
     # calibrated interval has under 0.3 % chance), and the three together cover 89-99 % (one
     # seed's three parameters are correlated: their mean spreads nearly as much as one).
     s = summarise(results)
-    assert bar_failures(s, dataclasses.replace(case.bars, coverage=(0.88, 1.0))) == [], case.label
+    assert bar_failures(s, dataclasses.replace(case.bars, coverage=(0.88, 1.0)), HALF) == [], case.label
     assert 0.89 <= float(np.mean(s.coverage_95)) <= 0.99, (case.label, s.coverage_95)
 
 
@@ -110,7 +113,7 @@ def test_known_stiffness_error_and_the_nuisance_fit():
     assert np.all(free.std <= np.array([10.0, 25.0, 0.01]))
 
 
-# Issue 10's acceptance: the mismatch suite's cases on held-out seeds (docs/RESULTS.md reports
+# The mismatch suite's cases on held-out seeds (docs/results.md reports
 # seeds 1-100). Coverage from 100 seeds is a binomial count: as above, a bar of 88 % per
 # parameter (a calibrated interval falls below it with under 0.3 % chance).
 MISMATCH = suite("mismatch", TrialSpec())
@@ -123,7 +126,7 @@ IN_MODEL = "the model itself"  # ... and must not
 def test_mismatch(index):
     case = MISMATCH[index]
     s = summarise(compare(case.spec, ["likelihood"], SEEDS, jobs=2)["likelihood"])
-    assert bar_failures(s, dataclasses.replace(case.bars, coverage=(0.88, 1.0))) == [], case.label
+    assert bar_failures(s, dataclasses.replace(case.bars, coverage=(0.88, 1.0)), HALF) == [], case.label
     warns = [share for start, share in WARNS.items() if case.label.startswith(start)]
     if warns:
         assert s.model_warn_share >= warns[0], (case.label, s.model_warn_share)

@@ -13,8 +13,11 @@ from scipy.stats import skew
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.online import EstimatorConfig
 from rozyn_estimator.parameters import build, flatten
-from rozyn_estimator.tools import compare, demo, trial_command
-from rozyn_estimator.tools.trial import TrialSpec
+from rozyn_estimator.tools.compare import command as compare
+from rozyn_estimator.tools.demo import command as demo
+from rozyn_estimator.tools.trial import command as trial_command
+from rozyn_estimator.tools.trial.report import departure_lines
+from rozyn_estimator.tools.trial.spec import TrialSpec
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.departures import Departures, SuspensionLaw
 from sim_node.fixed_point import solve_fixed_point
@@ -284,14 +287,14 @@ def test_trial_and_compare_options_build_the_spec():
     expected = Departures(damper_ratio=2.0, spring_progression=0.5, spring_reference_m=0.04,
                           gain_error_front=0.03, time_offset_s=0.005, lowpass_hz=20.0)
     for spec in (trial_command.trial_spec(_parse(trial_command.add_arguments, ARGV)),
-                 compare._base_spec(_parse(compare.add_arguments, ARGV))):
+                 compare.base_spec(_parse(compare.add_arguments, ARGV))):
         assert spec.departures == expected
         errors = (spec.tyre_stiffness_error, spec.unsprung_mass_error, spec.tyre_damping_error)
         assert errors == (0.1, -0.13, 0.2)
         assert (spec.stiffness_error, spec.damping_error) == (0.05, -0.1)
     plain = trial_command.trial_spec(_parse(trial_command.add_arguments, []))
     assert plain.departures == Departures() and plain.estimator_vehicle is plain.vehicle
-    lines = trial_command.mismatch_lines(spec)
+    lines = departure_lines(spec.departures, spec.told_errors)
     assert "rear sensor +5 ms late" in lines[0] and "tyre stiffness +10 %" in lines[1]
 
 

@@ -3,29 +3,29 @@ a WARN (a note) where the suspension departs from it, no check on noise-free sen
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
 from rozyn_estimator.method.full import FullEstimate
 from rozyn_estimator.method.likelihood.fitcheck import ALPHA
 from rozyn_estimator.online.records import WARN, Update, layout_of, update_values
-from rozyn_estimator.tools.full_suites import FULL_PRESETS, acceptance_cases
-from rozyn_estimator.tools.trial_full import FullTrialSpec, run_full_trial
+from rozyn_estimator.tools.cars import FULL
+from rozyn_estimator.tools.compare.suites import suite
+from rozyn_estimator.tools.trial.run import run_trial
+from rozyn_estimator.tools.trial.spec import TrialSpec
 from sim_node.departures import Departures
 
-BASE = acceptance_cases(FULL_PRESETS["table5-1"])[3].spec  # ISO A, 100 km/h, 120 s, 10 % noise
+# ISO A, 100 km/h, 120 s, 10 % noise
+BASE = suite("acceptance", TrialSpec(vehicle=FULL.presets["table5-1"]))[3].spec
 
 
-def _estimates(spec: FullTrialSpec, seeds: range) -> list[FullEstimate]:
-    out = [run_full_trial(spec, seed).estimate for seed in seeds]
+def _estimates(spec: TrialSpec, seeds: range) -> list[FullEstimate]:
+    out = [run_trial(spec, seed).estimate for seed in seeds]
     assert all(e.ok for e in out)
     return out
 
 
-def _with(departures: Departures, noise: float = 0.1) -> FullTrialSpec:
-    sim = dataclasses.replace(BASE.sim, departures=departures)
-    return dataclasses.replace(BASE, sim=sim, noise_fraction=noise)
+def _with(departures: Departures, noise: float = 0.1) -> TrialSpec:
+    return BASE.replace(departures=departures, noise_fraction=noise)
 
 
 def test_the_models_own_data_fit():

@@ -12,24 +12,18 @@ import pytest
 from rozyn_estimator.method.full import FULL_PARAM_NAMES
 from rozyn_estimator.method.full.refine import refine_full
 from rozyn_estimator.tools.cli import main
-from rozyn_estimator.tools.limit_full import infinite_data_limit, record_spectra
-from rozyn_estimator.tools.trial_full import FullTrialSpec, simulate_full
+from rozyn_estimator.tools.trial.limit import infinite_data_limit, record_spectra
+from rozyn_estimator.tools.trial.run import simulate
+from rozyn_estimator.tools.trial.spec import TrialSpec
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
-from sim_node.road import RoadSpec
-from sim_node.simulation import SimConfig
 
 _SEEDS = range(1, 9)
 
 
-def _spec(**errors: float) -> FullTrialSpec:
+def _spec(tyre: float = 0.0) -> TrialSpec:
     exact = dataclasses.replace(FullVehicle(), tolerances=FullTolerances.none())
-    sim = SimConfig(model="full", full_vehicle=exact, road=RoadSpec(amplitudes="gaussian"), speed_kmh=100.0,
-                    duration_s=120.0)
-    told = None
-    if errors:
-        told = dataclasses.replace(exact, tyre_stiffness_npm=tuple(k * (1 + errors["tyre"])
-                                                                   for k in exact.tyre_stiffness_npm))
-    return FullTrialSpec(sim=sim, noise_fraction=0.1, told=told)
+    return TrialSpec(vehicle=exact, amplitudes="gaussian", speed_kmh=100.0, duration_s=120.0,
+                     noise_fraction=0.1, tyre_stiffness_error=tyre)
 
 
 def test_the_limit_of_the_model_itself_lies_within_its_standard_errors():
@@ -78,9 +72,10 @@ def test_what_the_limit_cannot_do_is_refused(argv, capsys):
     assert "--limit" in capsys.readouterr().err
 
 
-def _one_record(spec: FullTrialSpec, seed: int) -> tuple:
-    accel, speed, channels, _ = simulate_full(spec, seed)
+def _one_record(spec: TrialSpec, seed: int) -> tuple:
+    block = simulate(spec, seed)
+    accel, speed, channels = block.accel_mps2, block.speed_mps, block.channels
     sensors = tuple(range(4))
     assert len(channels) == 4
-    return accel, spec.sim.rate_hz, spec.vehicle, sensors, spec.truth, speed, \
+    return accel, spec.rate_hz, spec.estimator_vehicle, sensors, spec.truth, speed, \
         spec.pipeline_config().likelihood

@@ -22,9 +22,10 @@ from rosbags.typesys import Stores, get_typestore
 from test_replay import CONFIG, _stream, _write
 
 from rozyn_estimator.method.full import FULL_PARAM_NAMES
-from rozyn_estimator.tools import cli, replay_plot
+from rozyn_estimator.tools import cli
+from rozyn_estimator.tools.replay import plot as replay_plot
 from rozyn_estimator.tools.replay import replay
-from rozyn_estimator.tools.replay_fleet import (
+from rozyn_estimator.tools.replay.fleet import (
     CSV_COLUMNS,
     FLEET_CSV,
     FULL_CSV_COLUMNS,

@@ -16,7 +16,7 @@ from rozyn_estimator.method.full import FULL_PARAM_NAMES
 from rozyn_estimator.online import CUSTOM_DATA_KEY, EstimatorConfig
 from rozyn_estimator.tools import cli
 from rozyn_estimator.tools.replay import replay
-from rozyn_estimator.tools.replay_plot import read_updates
+from rozyn_estimator.tools.replay.plot import read_updates
 from rozyn_estimator.vehicle_full import CORNERS, load_full_vehicle
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -21,7 +21,7 @@ from rozyn_estimator.method import PARAM_NAMES
 from rozyn_estimator.tools import study
 from rozyn_estimator.tools.cli import main
 from rozyn_estimator.tools.study import Cell, StudySettings, parse_grid, work
-from rozyn_estimator.tools.trial import run_trial
+from rozyn_estimator.tools.trial.run import run_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 GRID = ["--roads", "iso,laplace", "--speeds-kmh", "50,100", "--durations-s", "20:40:20", "--trials", "4"]

@@ -21,10 +21,10 @@ from study_helpers import ctrl_c_at_chunk
 
 from rozyn_estimator.method import PARAM_NAMES
 from rozyn_estimator.method.full import FULL_PARAM_NAMES
+from rozyn_estimator.tools.cars import FULL, HALF
 from rozyn_estimator.tools.cli import main
 from rozyn_estimator.tools.study import Cell, StudySettings, summarise_cells
 from rozyn_estimator.tools.study.correlations import cell_correlations
-from rozyn_estimator.tools.study.models import FULL, HALF
 from rozyn_estimator.tools.study.plots import correlation_overlay, std_heatmaps
 from rozyn_estimator.tools.study.precision import meets_target
 from rozyn_estimator.tools.study.results import COLUMNS, FULL_COLUMNS, TrialRow, read_results

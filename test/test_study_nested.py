@@ -1,4 +1,4 @@
-"""Nested drives (``tools/drives.py``): a refined study's default design — one drive per road,
+"""Nested drives (``tools/trial/drives.py``): a refined study's default design — one drive per road,
 speed and trial, estimated after each measurement time, each update warm-started from the
 last — its seeds, its windows, resume of a drive cut short, and ``rozyn trial --durations-s``.
 """
@@ -17,9 +17,9 @@ from study_helpers import ctrl_c_at_chunk
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import estimate
 from rozyn_estimator.tools.cli import main
-from rozyn_estimator.tools.drives import drive_lengths, run_drive
 from rozyn_estimator.tools.study import Cell, StudySettings, work
-from rozyn_estimator.tools.trial import simulate
+from rozyn_estimator.tools.trial.drives import drive_lengths, run_drive
+from rozyn_estimator.tools.trial.run import simulate
 
 # Rozyn's method (fast) on nested drives: the design's bookkeeping, not the refinement's numbers
 GRID = ["--roads", "iso,laplace", "--speeds-kmh", "50,100", "--durations-s", "20,40", "--trials", "3",

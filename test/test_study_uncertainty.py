@@ -17,7 +17,6 @@ import pytest
 
 from rozyn_estimator.method import METHODS, PARAM_NAMES
 from rozyn_estimator.tools.cli import main
-from rozyn_estimator.tools.drives import run_drive
 from rozyn_estimator.tools.study import (
     Cell,
     CellSummary,
@@ -30,7 +29,8 @@ from rozyn_estimator.tools.study.plots import precision_lines
 from rozyn_estimator.tools.study.precision import meets_target, shortest_drive_markdown
 from rozyn_estimator.tools.study.results import COLUMNS, LEGACY_COLUMNS, scan_results
 from rozyn_estimator.tools.study.summary import summarise_cells
-from rozyn_estimator.tools.trial import run_trial
+from rozyn_estimator.tools.trial.drives import run_drive
+from rozyn_estimator.tools.trial.run import run_trial
 
 TRUTH = np.array([1000.0, 2000.0, 1.2])
 GRID = ["--roads", "iso", "--speeds-kmh", "100", "--durations-s", "20,40", "--trials", "4",

@@ -7,7 +7,9 @@ import pytest
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.tolerances import Tolerances
-from rozyn_estimator.tools.trial import TrialSpec, estimate_block, run_trials, simulate, summarise
+from rozyn_estimator.tools.trial.run import estimate_block, run_trials, simulate
+from rozyn_estimator.tools.trial.spec import TrialSpec
+from rozyn_estimator.tools.trial.summary import summarise
 from rozyn_estimator.vehicle import Vehicle
 
 SHORT = dict(amplitudes="gaussian", duration_s=40.0)

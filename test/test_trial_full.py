@@ -10,7 +10,8 @@ import pytest
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method.full import FULL_PARAM_NAMES
 from rozyn_estimator.tools.cli import main
-from rozyn_estimator.tools.trial_full import told_vehicle
+from rozyn_estimator.tools.trial.run import simulate
+from rozyn_estimator.tools.trial.spec import TrialSpec
 from rozyn_estimator.vehicle_full import FullVehicle
 
 
@@ -67,13 +68,13 @@ def test_the_full_car_takes_the_departures_and_the_wrong_values(capsys):
 
 def test_the_estimator_is_told_each_corners_value_off():
     v = FullVehicle()
-    told = told_vehicle(v, {"stiffness_error": 0.1, "unsprung_mass_error": -0.2, "damping_error": 0.0})
-    assert told is not None and told.suspension_stiffness_npm == pytest.approx([24750, 24750, 44000, 44000])
+    told = TrialSpec(vehicle=v, stiffness_error=0.1, unsprung_mass_error=-0.2).estimator_vehicle
+    assert told.suspension_stiffness_npm == pytest.approx([24750, 24750, 44000, 44000])
     assert told.unsprung_mass_kg == pytest.approx([16, 16, 26, 26])
     assert told.suspension_damping_nspm == v.suspension_damping_nspm
-    assert told_vehicle(v, {"stiffness_error": 0.0}) is None
+    assert TrialSpec(vehicle=v).estimator_vehicle is v
     with pytest.raises(ConfigError, match="stiffness_error"):
-        told_vehicle(v, {"stiffness_error": -1.0})
+        TrialSpec(vehicle=v, stiffness_error=-1.0)
 
 
 def test_corner_gains_are_refused_for_the_half_car(capsys):
@@ -88,7 +89,7 @@ def test_the_table_names_the_departures_and_the_model_check(capsys):
     out = capsys.readouterr().out
     assert "dampers 2x stiffer in rebound" in out and "+3 / +0 / +0 / +0 % (FL/FR/RL/RR)" in out
     assert "estimator told wrong: stiffness +5 %" in out
-    assert "model check: the full-car model does not fit in 1 of 1" in out
+    assert "model check: the full-car model does not fit the spectra" in out
 
 
 def test_the_table_names_the_five_parameters(capsys):
@@ -101,17 +102,9 @@ def test_the_table_names_the_five_parameters(capsys):
 def test_the_sensor_noise_is_not_a_copy_of_the_right_tracks_random_part():
     """The noise has its own stream: on the right track's (3) it repeated the same normal
     draws as the track's independent part, noise correlated with the road."""
-    import dataclasses
-
-    from rozyn_estimator.tools.trial_full import FullTrialSpec, simulate_full
-    from rozyn_estimator.vehicle_full import FullVehicle
-    from sim_node.road import RoadSpec
-    from sim_node.simulation import SimConfig
-
-    sim = SimConfig(model="full", full_vehicle=FullVehicle(), road=RoadSpec(amplitudes="gaussian"),
-                    duration_s=10.0, seed=3)
-    clean, *_ = simulate_full(FullTrialSpec(sim=sim), 3)
-    noisy, *_ = simulate_full(dataclasses.replace(FullTrialSpec(sim=sim), noise_fraction=0.1), 3)
+    spec = TrialSpec(vehicle=FullVehicle(), amplitudes="gaussian", duration_s=10.0)
+    clean = simulate(spec, 3).accel_mps2
+    noisy = simulate(spec.replace(noise_fraction=0.1), 3).accel_mps2
     noise = ((noisy - clean) / (0.1 * clean.std(axis=0))).ravel()
     for stream in range(4):  # the road's, the simulator's and the right track's streams
         draws = np.random.default_rng([3, stream]).standard_normal(noise.size)

@@ -40,15 +40,15 @@ class Command:
 
 # In the order ``rozyn --help`` lists them.
 COMMANDS = (
-    Command("trial", "simulate seeded runs and estimate from each", "trial_command"),
-    Command("demo", "the main job: sim and estimator nodes on sim time, estimate vs truth", "demo"),
-    Command("bench", "time the simulator and the pipeline (JSON)", "bench"),
+    Command("trial", "simulate seeded runs and estimate from each", "trial.command"),
+    Command("demo", "the main job: sim and estimator nodes on sim time, estimate vs truth", "demo.command"),
+    Command("bench", "time the simulator and the pipeline (JSON)", "bench.command"),
     Command("replay", "replay bags through the online estimator offline: CSV of updates + output bag",
-            "replay"),
+            "replay.command"),
     Command("study", "Monte-Carlo grid of the thesis: speed x measurement time x road, tables and plots",
-            "study"),
+            "study.command"),
     Command("compare", "run several methods on the same seeded runs: bias, std, 95 %% coverage, failures, "
-            "time", "compare"),
+            "time", "compare.command"),
 )
 _BY_NAME = {c.name: c for c in COMMANDS}
 

@@ -1,9 +1,8 @@
 """``rozyn study``: the thesis' Monte-Carlo grids (chapter 5); the package's public surface.
 
-Modules, by concern (each imports its siblings directly, never this package):
+Modules, by concern (each imports its siblings directly, never this package; the two cars,
+``--model``, are :mod:`rozyn_estimator.tools.cars`'):
 
-- :mod:`~rozyn_estimator.tools.study.models`: the half car and the full car (``--model``):
-  their parameters, modes, accelerometers and methods;
 - :mod:`~rozyn_estimator.tools.study.settings`: the grid, :class:`StudySettings`, the grid
   options' syntax and the names of the files a study writes;
 - :mod:`~rozyn_estimator.tools.study.results`: trial rows and ``results.csv``;

@@ -2,9 +2,9 @@
 
 Every (road, speed, measurement time, trial) of a grid is one seeded trial
 (:func:`rozyn_estimator.tools.trial.run_trial`; with ``--model full`` the 7-DOF full car's,
-:func:`rozyn_estimator.tools.trial_full.run_full_trial`, five parameters), or with nested
+:func:`rozyn_estimator.tools.trial.run.run_trial`, five parameters), or with nested
 drives (a refined method's default) every (road, speed, trial) one seeded drive, estimated
-after each measurement time (:mod:`rozyn_estimator.tools.drives`). Trials run in
+after each measurement time (:mod:`rozyn_estimator.tools.trial.drives`). Trials run in
 chunks on local processes or on a Dask distributed cluster (``--scheduler``); the parent
 process appends each finished chunk to ``results.csv``, so an interrupted study resumes
 where it stopped. Each trial's seed is a function of the study's seed base, the cell and
@@ -36,7 +36,7 @@ from typing import Any
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS
-from rozyn_estimator.tools.full_suites import FULL_PRESETS
+from rozyn_estimator.tools.cars import CARS, FULL, HALF
 from rozyn_estimator.tools.study.directory import (
     check_model,
     check_same_study,
@@ -44,7 +44,6 @@ from rozyn_estimator.tools.study.directory import (
     prepare_dir,
     write_manifest,
 )
-from rozyn_estimator.tools.study.models import FULL, MODELS
 from rozyn_estimator.tools.study.outputs import write_outputs, write_tables
 from rozyn_estimator.tools.study.results import TrialRow, read_results
 from rozyn_estimator.tools.study.settings import (
@@ -66,8 +65,7 @@ from rozyn_estimator.tools.study.work import (
     connect_scheduler,
     run_study,
 )
-from rozyn_estimator.tools.suites import VEHICLE_PRESETS
-from rozyn_estimator.tools.trial import default_jobs
+from rozyn_estimator.tools.trial.run import default_jobs
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import FullVehicle, load_any_vehicle, load_full_vehicle
 
@@ -84,7 +82,7 @@ DESCRIPTION = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     grid = p.add_argument_group("grid (default: the thesis' chapter 5 grid)")
-    grid.add_argument("--model", choices=tuple(MODELS),
+    grid.add_argument("--model", choices=tuple(CARS),
                       help="half: the half car (front and rear accelerometers; m, I_yy, l_f); full: the "
                            "7-DOF full car on two road tracks, four corner accelerometers (m, I_xx, I_yy, "
                            f"l_f, y_c; methods {', '.join(FULL.methods)}; --vehicle then takes a full-car "
@@ -112,7 +110,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     vehicle.add_argument("--vehicle", metavar="FILE.yaml",
                          help="vehicle parameters (default: thesis Table 5-1; --model full: a file with "
                               "model: full, e.g. config/vehicle_full.yaml)")
-    vehicle.add_argument("--vehicle-preset", choices=tuple(VEHICLE_PRESETS),
+    vehicle.add_argument("--vehicle-preset", choices=tuple(HALF.presets),
                          help="a built-in vehicle: table5-1 (the default) or second (heavier, longer; the "
                               "full car's: an SUV with its CoG 3 cm left of the centreline)")
     grid.add_argument("--seed-base", type=int, metavar="N", help="changes every road seed (default: 0)")
@@ -185,13 +183,13 @@ def _vehicle(args: argparse.Namespace, model: str) -> Vehicle | FullVehicle | No
     """The vehicle of ``--vehicle`` or ``--vehicle-preset`` for the model (None: neither given)."""
     path, preset = getattr(args, "vehicle", None), getattr(args, "vehicle_preset", None)
     if model == "full":
-        return load_full_vehicle(path) if path else FULL_PRESETS[preset] if preset else None
+        return load_full_vehicle(path) if path else FULL.presets[preset] if preset else None
     if path:
         vehicle = load_any_vehicle(path)
         if isinstance(vehicle, FullVehicle):
             raise ConfigError(f"{path}: a full-car vehicle file (model: full); study it with --model full")
         return vehicle
-    return VEHICLE_PRESETS[preset] if preset else None
+    return HALF.presets[preset] if preset else None
 
 
 def _parse_cell(text: str | None) -> tuple[float, float] | None:

@@ -18,7 +18,6 @@ import numpy as np
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.tools.study.settings import Cell, StudySettings
 from rozyn_estimator.tools.study.work import one_blas_thread
-from rozyn_estimator.tools.trial_full import FullTrialSpec, simulate_full
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import FullVehicle
 
@@ -41,7 +40,7 @@ def cell_correlations(
     The same seeds give the same records as the study's trials (default: its first 100).
     """
     from rozyn_estimator.method.correlation import correlation_sums
-    from sim_node.simulation import Simulation
+    from rozyn_estimator.tools.trial.run import simulate
 
     one_blas_thread()
     trials = range(min(100, settings.trials)) if trials is None else trials
@@ -50,10 +49,7 @@ def cell_correlations(
     acf = np.empty((len(trials), max_lag + 1, len(settings.car.channels)))
     for i, trial in enumerate(trials):
         seed = settings.seed(cell, trial)
-        if isinstance(spec, FullTrialSpec):  # the full car's record with its noise, as its trial's
-            y = simulate_full(spec, seed)[0]
-        else:
-            y = Simulation(spec.sim_config(seed)).run(cell.duration_s).accel_mps2
+        y = simulate(spec, seed).accel_mps2  # the trial's record, its relative noise included
         sums = correlation_sums(y - y.mean(axis=0), max_lag)[0]
         acf[i] = np.column_stack([sums[:, j, j] / sums[0, j, j] for j in range(acf.shape[2])])
     return CellCorrelations(cell, np.arange(max_lag + 1) / settings.rate_hz, acf,

@@ -28,21 +28,19 @@ import numpy as np
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import Estimate
-from rozyn_estimator.method.full import FullEstimate
-from rozyn_estimator.tools.study.models import FULL, HALF, StudyModel
+from rozyn_estimator.tools.cars import CARS, FULL, HALF, AnyEstimate, Car
 from rozyn_estimator.tools.study.settings import Cell, StudySettings, fmt_value
-from rozyn_estimator.tools.trial import TrialResult
-from rozyn_estimator.tools.trial_full import FullTrialResult
+from rozyn_estimator.tools.trial.run import TrialResult
 
 _KEY_COLUMNS = ("road", "speed_kmh", "duration_s", "trial", "seed", "status", "stage")
 
 
-def mode_columns(model: StudyModel) -> tuple[str, ...]:
+def mode_columns(model: Car) -> tuple[str, ...]:
     """``mode1_freq_hz``, ``mode1_damping``, … for the model's modes."""
     return tuple(f"mode{k}_{q}" for k in range(1, model.n_modes + 1) for q in ("freq_hz", "damping"))
 
 
-def columns(model: StudyModel) -> tuple[str, ...]:
+def columns(model: Car) -> tuple[str, ...]:
     """The header of a results file: the estimate, its published std (``<param>_std``) and the
     std's statistical part (``<param>_std_statistical``) per parameter, the modes, the reason."""
     names = model.names
@@ -79,17 +77,17 @@ class TrialRow:
         return (self.cell.road, self.cell.speed_kmh, self.cell.duration_s, self.trial)
 
     @classmethod
-    def from_result(cls, cell: Cell, trial: int, result: TrialResult | FullTrialResult) -> TrialRow:
+    def from_result(cls, cell: Cell, trial: int, result: TrialResult) -> TrialRow:
         """The row of a half-car trial (two modes) or a full-car one (three)."""
         est = result.estimate
-        n_modes = (FULL if isinstance(est, FullEstimate) else HALF).n_modes
+        n_modes = CARS[result.model].n_modes
         modes: Modes | None = None
         if len(est.modes) >= n_modes:
             modes = tuple(float(x) for md in est.modes[:n_modes] for x in (md.freq_hz, md.damping_ratio))
         return cls(cell, trial, result.seed, est.status, _params(est.params), modes, est.reason,
                    getattr(est, "stage", "rozyn"), _params(est.std), _params(_statistical_std(est)))
 
-    def to_csv(self, model: StudyModel = HALF) -> list[str]:
+    def to_csv(self, model: Car = HALF) -> list[str]:
         def num(values: Sequence[float] | None, n: int) -> list[str]:
             return [""] * n if values is None else [repr(float(v)) for v in values]
 
@@ -99,7 +97,7 @@ class TrialRow:
                 *num(self.std_statistical, k), *num(self.modes, 2 * model.n_modes), self.reason]
 
     @classmethod
-    def from_csv(cls, record: dict[str, str], model: StudyModel = HALF) -> TrialRow:
+    def from_csv(cls, record: dict[str, str], model: Car = HALF) -> TrialRow:
         """A row from a CSV record (of :func:`columns`, or :data:`LEGACY_COLUMNS`: no std)."""
         def nums(names: Sequence[str]) -> tuple[float, ...] | None:
             text = [record.get(n, "") for n in names]
@@ -122,20 +120,20 @@ def _params(values: Sequence[float] | np.ndarray | None) -> Params | None:
     return None if values is None else tuple(float(v) for v in values)
 
 
-def _statistical_std(est: Estimate | FullEstimate) -> np.ndarray | None:
+def _statistical_std(est: AnyEstimate) -> np.ndarray | None:
     """The std of the statistical part alone: the budget's statistical covariance, or the
     covariance when there is no budget."""
     cov = est.budget.statistical if est.budget is not None else est.covariance
     return None if cov is None else np.sqrt(np.diag(cov))
 
 
-def read_results(path: Path, model: StudyModel | None = None) -> list[TrialRow]:
+def read_results(path: Path, model: Car | None = None) -> list[TrialRow]:
     """The complete rows of a results file (a line cut short by an interruption is skipped)."""
     rows, _ = scan_results(path, model)
     return rows
 
 
-def scan_results(path: Path, model: StudyModel | None = None) -> tuple[list[TrialRow], bool]:
+def scan_results(path: Path, model: Car | None = None) -> tuple[list[TrialRow], bool]:
     """(rows, clean): ``clean`` is False when rows cannot be appended to the file as it is:
     it ends in a partial line, holds a line that is not a row, or has the legacy header.
 
@@ -169,7 +167,7 @@ class ResultsWriter:
     """Appends trial rows to ``results.csv``, flushed after each chunk."""
 
     def __init__(self, path: Path, rows: Sequence[TrialRow] = (), rewrite: bool = False,
-                 model: StudyModel = HALF) -> None:
+                 model: Car = HALF) -> None:
         self.path = path
         self.model = model
         if rewrite or not path.exists():
@@ -185,7 +183,7 @@ class ResultsWriter:
         self._file.close()
 
 
-def write_results(path: Path, rows: Iterable[TrialRow], model: StudyModel = HALF) -> None:
+def write_results(path: Path, rows: Iterable[TrialRow], model: Car = HALF) -> None:
     """Write a whole results file (atomically: a new file, then renamed over the old one)."""
     tmp = path.with_suffix(".csv.tmp")
     with tmp.open("w", newline="") as f:

@@ -18,13 +18,10 @@ import numpy as np
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS, PipelineConfig
 from rozyn_estimator.parameters import check, param
-from rozyn_estimator.tools.study.models import MODELS, StudyModel
-from rozyn_estimator.tools.trial import TrialSpec
-from rozyn_estimator.tools.trial_full import FullTrialSpec
+from rozyn_estimator.tools.cars import CARS, Car
+from rozyn_estimator.tools.trial.spec import TrialSpec
 from rozyn_estimator.vehicle import Vehicle, vehicle_from_mapping
 from rozyn_estimator.vehicle_full import FullVehicle, full_vehicle_from_mapping
-from sim_node.road import RoadSpec
-from sim_node.simulation import SimConfig
 
 STUDY_ROADS = ("iso", "laplace")
 DRIVES = ("independent", "nested")
@@ -66,7 +63,7 @@ class StudySettings:
     """
 
     model: str = param("half", "vehicle model: half (front and rear accelerometers) or full (four corners, "
-                       "two road tracks: roll inertia and lateral CoG too)", choices=tuple(MODELS))
+                       "two road tracks: roll inertia and lateral CoG too)", choices=tuple(CARS))
     roads: tuple[str, ...] = param(STUDY_ROADS, "roads of the grid: iso, laplace")
     speeds_kmh: tuple[float, ...] = param(tuple(float(v) for v in range(30, 101, 10)), "speeds of the grid",
                                           unit="km/h", low=0.0, open_low=True)
@@ -85,19 +82,19 @@ class StudySettings:
     seed_base: int = param(0, "changes every road seed", low=0)
     drives: str = param("", "independent: a drive per cell and trial (the thesis' design); nested: one drive "
                         "per road, speed and trial, estimated after each measurement time of it, each update "
-                        "warm-started from the last (tools/drives.py); empty: nested for a refined method, "
-                        "else independent", choices=("", *DRIVES))
+                        "warm-started from the last (tools/trial/drives.py); empty: nested for a refined "
+                        "method, else independent", choices=("", *DRIVES))
     vehicle: Vehicle = param(description="the half car", default_factory=Vehicle)
     full_vehicle: FullVehicle = param(description="the full car (model full)", default_factory=FullVehicle)
 
     def __post_init__(self) -> None:
-        if not self.method and self.model in MODELS:  # an unknown model is refused by check()
+        if not self.method and self.model in CARS:  # an unknown model is refused by check()
             object.__setattr__(self, "method", default_method(self.model))
         if not self.drives and self.method in METHODS:
             object.__setattr__(self, "drives", "nested" if self.refined else "independent")
         check(self, (
             ("method", lambda s: s.method in s.car.methods,
-             f"the full car has {', '.join(MODELS['full'].methods)}"),
+             f"the full car has {', '.join(CARS['full'].methods)}"),
             ("roads", lambda s: bool(s.roads), "the grid needs at least one road"),
             ("roads", lambda s: all(r in STUDY_ROADS for r in s.roads),
              f"each road must be one of {', '.join(STUDY_ROADS)}"),
@@ -115,9 +112,9 @@ class StudySettings:
         return [Cell(r, s, d) for r in self.roads for s in self.speeds_kmh for d in self.durations_s]
 
     @property
-    def car(self) -> StudyModel:
+    def car(self) -> Car:
         """What the model estimates and how the study's files name it."""
-        return MODELS[self.model]
+        return CARS[self.model]
 
     @property
     def studied_vehicle(self) -> Vehicle | FullVehicle:
@@ -159,22 +156,13 @@ class StudySettings:
             cfg = _without_refinement(cfg)
         return cfg if getattr(cfg, "refine", "none") != "none" else cfg.replace(variance="none")
 
-    def trial_spec(self, cell: Cell) -> TrialSpec | FullTrialSpec:
+    def trial_spec(self, cell: Cell) -> TrialSpec:
         """A cell's trial conditions (the seed picks the road)."""
-        if self.model == "full":
-            road = RoadSpec(kind=cell.road, road_class=self.road_class, amplitudes=self.amplitudes,
-                            laplace_nu=self.laplace_nu)
-            sim = SimConfig(model="full", full_vehicle=self.full_vehicle, road=road,
-                            speed_kmh=cell.speed_kmh, duration_s=cell.duration_s, rate_hz=self.rate_hz,
-                            noise_std_mps2=self.noise_std_mps2)
-            return FullTrialSpec(sim=sim, noise_fraction=self.noise_fraction, method=self.method,
-                                 pipeline=self.pipeline_config())
         return TrialSpec(
             road=cell.road, road_class=self.road_class, amplitudes=self.amplitudes,
             laplace_nu=self.laplace_nu, speed_kmh=cell.speed_kmh, duration_s=cell.duration_s,
             rate_hz=self.rate_hz, noise_std_mps2=self.noise_std_mps2, noise_fraction=self.noise_fraction,
-            vehicle=self.vehicle,
-            method=self.method, pipeline=self.pipeline_config(),
+            vehicle=self.studied_vehicle, method=self.method, pipeline=self.pipeline_config(),
         )
 
     def seed(self, cell: Cell, trial: int) -> int:
@@ -227,7 +215,7 @@ class StudySettings:
 def default_method(model: str = "half") -> str:
     """The study's default method: the half car's, Rozyn's pipeline (``rozyn``), the thesis'
     subject; the full car's, ``likelihood`` (Rozyn's stage, then the likelihood refinement)."""
-    return MODELS[model].default_method
+    return CARS[model].default_method
 
 
 def _without_refinement(cfg: PipelineConfig) -> PipelineConfig:

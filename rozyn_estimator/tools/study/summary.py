@@ -7,7 +7,7 @@ standard deviation with each estimate, how honest it is: its rms over the trials
 published std and for its statistical part alone.
 
 Relative statistics (bias, share within 6 %) are of the truth; the full car's lateral CoG's,
-whose truth is often 0, of the half track (:mod:`~rozyn_estimator.tools.study.models`).
+whose truth is often 0, of the half track (:mod:`~rozyn_estimator.tools.cars`).
 """
 
 from __future__ import annotations
@@ -19,17 +19,17 @@ from pathlib import Path
 
 import numpy as np
 
-from rozyn_estimator.tools.study.models import HALF, StudyModel
+from rozyn_estimator.tools.cars import HALF, Car
 from rozyn_estimator.tools.study.results import Params, TrialRow
 from rozyn_estimator.tools.study.settings import Cell, StudySettings, fmt_value
-from rozyn_estimator.tools.trial import summarise
+from rozyn_estimator.tools.trial.summary import summarise
 
 Z_95 = 1.96  # the two-sided 95 % quantile of the normal distribution
 SUMMARY_STATS = ("mean", "std", "bias_pct", "within_6pct", "robust_std", "reported_std", "coverage_95",
                  "reported_std_statistical", "coverage_95_statistical")
 
 
-def summary_columns(model: StudyModel) -> tuple[str, ...]:
+def summary_columns(model: Car) -> tuple[str, ...]:
     """The header of ``summary.csv``: the cell, then every statistic per parameter."""
     return ("road", "speed_kmh", "duration_s", "trials", "failures", "with_std",
             *(f"{p}_{stat}" for p in model.names for stat in SUMMARY_STATS))
@@ -130,7 +130,7 @@ def study_title(settings: StudySettings) -> str:
             f"{noise}, method {settings.method}, {settings.trials} trials per cell")
 
 
-def write_summary_csv(summaries: Sequence[CellSummary], path: Path, model: StudyModel = HALF) -> None:
+def write_summary_csv(summaries: Sequence[CellSummary], path: Path, model: Car = HALF) -> None:
     """``summary.csv``: the per-cell statistics at full precision."""
     with path.open("w", newline="") as f:
         out = csv.writer(f, lineterminator="\n")
@@ -170,7 +170,7 @@ def summary_markdown(settings: StudySettings, summaries: Sequence[CellSummary]) 
     return lines
 
 
-def _legend(stds: bool, model: StudyModel) -> str:
+def _legend(stds: bool, model: Car) -> str:
     text = ("std: the spread of the successful trials' estimates (sample std); bias: mean / truth − 1; "
             "failures: trials without an estimate.")
     scaled = [p.symbol for p in model.params if p.of_half_track]

@@ -1,10 +1,9 @@
 """Running a study's trials: chunks of one cell, on local processes or a Dask cluster.
 
 Every (road, speed, measurement time, trial) is one seeded trial
-(:func:`rozyn_estimator.tools.trial.run_trial`; the full car's:
-:func:`rozyn_estimator.tools.trial_full.run_full_trial`), or, with nested drives, every (road,
+(:func:`rozyn_estimator.tools.trial.run.run_trial`, either car), or, with nested drives, every (road,
 speed, trial) one seeded drive estimated after each measurement time
-(:mod:`rozyn_estimator.tools.drives`). :func:`run_study` runs the missing ones in chunks
+(:mod:`rozyn_estimator.tools.trial.drives`). :func:`run_study` runs the missing ones in chunks
 (:class:`Chunk`) and appends each finished chunk to ``results.csv``. Each trial's seed
 depends on the settings, the cell and the trial number only, and each trial runs on one
 BLAS thread: the results are bit-identical whatever the number of workers.
@@ -25,12 +24,12 @@ from pathlib import Path
 from typing import Any
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.tools.drives import run_any_drive
 from rozyn_estimator.tools.study.directory import load_manifest, new_manifest, write_manifest
 from rozyn_estimator.tools.study.results import ResultsWriter, TrialRow, sort_rows, write_results
 from rozyn_estimator.tools.study.settings import MANIFEST, RESULTS, Cell, StudySettings
-from rozyn_estimator.tools.trial import TrialSpec, limit_threads, run_trial
-from rozyn_estimator.tools.trial_full import FullTrialSpec, run_full_trial
+from rozyn_estimator.tools.trial.drives import run_drive_args
+from rozyn_estimator.tools.trial.run import limit_threads, run_trial
+from rozyn_estimator.tools.trial.spec import TrialSpec
 
 DEFAULT_CHUNK_TRIALS = 25
 
@@ -40,7 +39,7 @@ class Chunk:
     """Trials of one cell, run as one task (amortises process and scheduler overhead); nested
     drives: of one road and speed, ``cell`` at the longest of ``durations_s``."""
 
-    spec: TrialSpec | FullTrialSpec
+    spec: TrialSpec
     cell: Cell
     trials: tuple[int, ...]
     seeds: tuple[int, ...]
@@ -70,7 +69,7 @@ def _run_one(chunk: Chunk, trial: int, seed: int) -> list[TrialRow]:
     """One trial; an exception becomes an ``error`` row so one bad road cannot stop a study."""
     try:
         spec = chunk.spec
-        result = run_full_trial(spec, seed) if isinstance(spec, FullTrialSpec) else run_trial(spec, seed)
+        result = run_trial(spec, seed)
         return [TrialRow.from_result(chunk.cell, trial, result)]
     except Exception as exc:
         return [_error_row(chunk.cell, trial, seed, exc)]
@@ -80,7 +79,7 @@ def _run_drive(chunk: Chunk, trial: int, seed: int) -> list[TrialRow]:
     """One nested drive: a row per measurement time (all ``error`` rows if it raises)."""
     cells = [Cell(chunk.cell.road, chunk.cell.speed_kmh, d) for d in sorted(chunk.durations_s)]
     try:
-        results = run_any_drive((chunk.spec, seed, chunk.durations_s))
+        results = run_drive_args((chunk.spec, seed, chunk.durations_s))
         return [TrialRow.from_result(cell, trial, r) for cell, r in zip(cells, results, strict=True)]
     except Exception as exc:
         return [_error_row(cell, trial, seed, exc) for cell in cells]

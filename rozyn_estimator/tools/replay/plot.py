@@ -9,7 +9,7 @@ y_c and its three body modes. On every panel the updates that failed (no estimat
 identification failed, speed varied …) are red lines, those that published with a
 warning orange ones, and the stretches where the window was still filling are shaded.
 
-Columns are read by name (:data:`~rozyn_estimator.tools.replay_outputs.CSV_COLUMNS`), so
+Columns are read by name (:data:`~rozyn_estimator.tools.replay.outputs.CSV_COLUMNS`), so
 a CSV with more columns plots the same. Built on ``matplotlib.figure.Figure`` (no pyplot
 state): safe in any thread or process.
 """

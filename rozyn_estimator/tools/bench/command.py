@@ -3,7 +3,7 @@
 Each figure is the median over ``repeats`` runs after one warm-up, single BLAS thread
 (as the trials run). Peak memory is the process' maximum resident set size. With
 ``--nodes``, the estimator node under load over DDS instead
-(:mod:`rozyn_estimator.tools.node_bench`); with ``--silent-sensor``, the online
+(:mod:`rozyn_estimator.tools.bench.nodes`); with ``--silent-sensor``, the online
 estimator's resident memory over an hour of a 1 kHz front sensor whose rear partner
 never speaks (it must stay flat: each channel holds at most two windows).
 """
@@ -25,7 +25,8 @@ import numpy as np
 from rozyn_estimator.method import METHODS, PipelineConfig, estimate
 from rozyn_estimator.method.full import estimate_full
 from rozyn_estimator.tolerances import Tolerances
-from rozyn_estimator.tools.trial import TrialSpec, limit_threads
+from rozyn_estimator.tools.trial.run import limit_threads
+from rozyn_estimator.tools.trial.spec import TrialSpec
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import FullVehicle
 from sim_node.road import Road, RoadSpec
@@ -47,7 +48,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """``rozyn bench``: the figures as JSON on stdout."""
     if args.nodes:
-        from rozyn_estimator.tools.node_bench import run_node_bench
+        from rozyn_estimator.tools.bench.nodes import run_node_bench
 
         print(json.dumps(run_node_bench(quick=args.quick), indent=2))
         return 0
@@ -87,7 +88,7 @@ def _full_car_figures(repeats: int, half_warm: Callable[[], Any],
                       half_cold: Callable[[], Any]) -> dict[str, float]:
     """The full car's refined update (120 s, 100 Hz, four sensors, the default tolerances'
     budget) cold and warm, and per the half car's (``half_warm``, ``half_cold``: its updates)
-    timed in turn with it (issue 13: <= 3x)."""
+    timed in turn with it (goal: <= 3x)."""
     vehicle = FullVehicle()
     live = Simulation(SimConfig(model="full", full_vehicle=vehicle, road=RoadSpec(amplitudes="gaussian"),
                                 seed=3, noise_std_mps2=0.05))
@@ -154,11 +155,11 @@ def run_bench(repeats: int = 20) -> dict[str, Any]:
             max(3, repeats // 2)),
         "trial_100s_iso_ms": _median_ms(lambda: _trial(), max(3, repeats // 4)),
         "study_trials_per_second": _study_trials_per_second(max(1, repeats // 10)),
-        # the refined study's grid (issue 12): Gaussian roads, 10 % sensor noise
+        # the refined study's grid: Gaussian roads, 10 % sensor noise
         "study_refined_trials_per_second": _study_trials_per_second(max(1, repeats // 20), "likelihood",
                                                                     "gaussian", 0.1),
     }
-    # the refinement's goals (issue 12), as ratios to Rozyn's update with its covariance
+    # the refinement's goals, as ratios to Rozyn's update with its covariance
     out["refined_warm_per_rozyn_update"] = out["refined_update_warm_ms"] / out["update_120s_window_ms"]
     out["refined_cold_per_rozyn_update"] = out["refined_update_cold_ms"] / out["update_120s_window_ms"]
     out["budget_overhead_pct"] = 100.0 * (
@@ -221,7 +222,7 @@ def _rss_mb() -> float:
 
 
 def _trial() -> None:
-    from rozyn_estimator.tools.trial import run_trial
+    from rozyn_estimator.tools.trial.run import run_trial
 
     run_trial(TrialSpec(), 1)
 

@@ -3,14 +3,14 @@
 Reads a rosbag2 bag (MCAP or SQLite3) or a ROS 1 bag and feeds the accelerometer messages
 through :class:`~rozyn_estimator.online.estimator.OnlineEstimator` (the node's own online
 code, driven by the message stamps) in the order the bag received them
-(:func:`replay_reader`); :mod:`rozyn_estimator.tools.replay_outputs` writes what comes
-out, :mod:`rozyn_estimator.tools.replay_plot` draws it.
+(:func:`replay_reader`); :mod:`rozyn_estimator.tools.replay.outputs` writes what comes
+out, :mod:`rozyn_estimator.tools.replay.plot` draws it.
 
 The estimator is configured from the bag: the recorder stores the estimator node's
 configuration in it, so a recorded run replays to the estimates the node published.
 Options (:class:`ReplayOptions`) override it; a bag without one (``ros2 bag record``) uses
 the node's defaults. :func:`replay_bag` does all of it for one bag into one directory:
-the unit of work of a fleet replay (:mod:`rozyn_estimator.tools.replay_fleet`).
+the unit of work of a fleet replay (:mod:`rozyn_estimator.tools.replay.fleet`).
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from rozyn_estimator.online import (
     OnlineEstimator,
     SpeedSamples,
 )
-from rozyn_estimator.tools.replay_outputs import (
+from rozyn_estimator.tools.replay.outputs import (
     PUBLISHED_TOPIC,
     TRUTH_TOPIC,
     ReplayedUpdate,
@@ -100,7 +100,7 @@ def replay_bag(bag: Path, out_dir: Path, options: ReplayOptions, progress: bool 
         ConfigError: an option or the recorded configuration is invalid, or ``plot`` is
             asked for without matplotlib.
     """
-    from rozyn_estimator.tools.replay_plot import PLOT_NAME, matplotlib_available, plot_estimates
+    from rozyn_estimator.tools.replay.plot import PLOT_NAME, matplotlib_available, plot_estimates
 
     plot = matplotlib_available() if options.plot is None else options.plot
     if plot and not matplotlib_available():

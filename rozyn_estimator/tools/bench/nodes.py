@@ -295,7 +295,7 @@ def run_node_bench(quick: bool = False) -> dict[str, Any]:
         "at_2x1khz": bench_cpu_and_latency(domain, 1000.0, run_s),
         "at_2x1khz_rozyn_only": bench_cpu_and_latency(domain, 1000.0, run_s, refine="none"),
         "rss": bench_rss(domain, sim_s=120.0 if quick else 600.0),
-        # update_latency_ms: Rozyn's stage only; the refined one at 2 x 100 Hz (issue 12): 40 ms
+        # update_latency_ms: Rozyn's stage only; the refined one at 2 x 100 Hz: 40 ms
         "goals": {"rate_hz_per_sensor": 1000, "cpu_pct_at_2x1khz": 25.0, "update_latency_ms": 20.0,
                   "refined_update_latency_ms_at_2x100hz": 40.0},
     }

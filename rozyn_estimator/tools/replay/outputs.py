@@ -203,7 +203,7 @@ def csv_columns(layout: Layout = HALF_LAYOUT) -> tuple[str, ...]:
         "sample_rate_hz",
         "speed_mps",
         "pipeline_ms",
-        # the published std's parts and largest contributors (issue 10), the model-fit check
+        # the published std's parts and largest contributors, the model-fit check
         # and the glitches gated: as /diagnostics says them (online.records.update_values)
         *budget_columns(layout),
         "model_fit_p",

@@ -2,22 +2,22 @@
 
 One bag: it is fed through :class:`~rozyn_estimator.online.estimator.OnlineEstimator`
 (the node's own online code, driven by the message stamps) in the order the bag received
-the messages (:mod:`rozyn_estimator.tools.replay_feed`), and the output directory gets
+the messages (:mod:`rozyn_estimator.tools.replay.feed`), and the output directory gets
 
 - ``updates.csv``: one row per scheduled update (stamp, status, estimates, std,
   covariance, modes, window fill, speed, pipeline time), numbers at full precision;
 - ``estimates/``: a rosbag2 MCAP bag with ``/inertia``, ``/inertia/covariance`` and
   ``/diagnostics`` as the node would have published them, logged at the bag time of
-  the message that made each update due (:mod:`rozyn_estimator.tools.replay_outputs`);
-- ``estimates.png``: the estimates over time (:mod:`rozyn_estimator.tools.replay_plot`),
+  the message that made each update due (:mod:`rozyn_estimator.tools.replay.outputs`);
+- ``estimates.png``: the estimates over time (:mod:`rozyn_estimator.tools.replay.plot`),
   when matplotlib is installed (``--plot`` insists, ``--no-plot`` skips);
 
-then a report (:mod:`rozyn_estimator.tools.replay_report`). Several bags, or a directory
+then a report (:mod:`rozyn_estimator.tools.replay.report`). Several bags, or a directory
 of bags: each is replayed the same way in parallel, one table and ``fleet.csv``
-(:mod:`rozyn_estimator.tools.replay_fleet`).
+(:mod:`rozyn_estimator.tools.replay.fleet`).
 
 This module is the command (the protocol of ``rozyn``: :data:`HELP`, :data:`DESCRIPTION`,
-:func:`add_arguments`, :func:`run`) and re-exports :func:`replay`.
+:func:`add_arguments`, :func:`run`).
 """
 
 from __future__ import annotations
@@ -28,12 +28,12 @@ from pathlib import Path
 
 from rozyn_estimator.errors import BagError
 from rozyn_estimator.online import SPEED_TOPIC_TYPES
-from rozyn_estimator.tools.replay_feed import ReplayOptions, replay, replay_bag
-from rozyn_estimator.tools.replay_outputs import utc
-from rozyn_estimator.tools.replay_report import format_summary
+from rozyn_estimator.tools.replay.feed import ReplayOptions, replay_bag
+from rozyn_estimator.tools.replay.outputs import utc
+from rozyn_estimator.tools.replay.report import format_summary
 from rozyn_estimator.vehicle_full import CORNERS
 
-__all__ = ["DESCRIPTION", "HELP", "add_arguments", "replay", "run"]
+__all__ = ["DESCRIPTION", "HELP", "add_arguments", "run"]
 
 HELP = "replay bags through the online estimator offline: CSV of updates + output bag"  # as cli.py lists it
 DESCRIPTION = (
@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
             update fell due.
         ConfigError: an option or the recorded configuration is invalid.
     """
-    from rozyn_estimator.tools.replay_fleet import find_bags, run_fleet
+    from rozyn_estimator.tools.replay.fleet import find_bags, run_fleet
 
     bags = find_bags([Path(b) for b in args.bags])
     if len(args.bags) == 1 and bags == [Path(args.bags[0])]:

@@ -18,7 +18,7 @@ an update is due while the last one still computes. A slow or loaded machine slo
 demo down (the summary says by how much) instead of losing samples.
 
 The updates are written to ``<out>/updates.csv`` as ``rozyn replay`` writes them, and
-drawn in ``<out>/estimates.png`` (:mod:`rozyn_estimator.tools.demo_output`).
+drawn in ``<out>/estimates.png`` (:mod:`rozyn_estimator.tools.demo.output`).
 
 ``--model full`` (or ``--vehicle`` a full car's file) runs the full car: the simulator's
 four corner accelerometers, the estimator on them, roll inertia and lateral CoG besides.
@@ -41,7 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from rozyn_estimator.errors import BagError, ConfigError
-from rozyn_estimator.tools.demo_output import Seen, print_new, summary, write_outputs
+from rozyn_estimator.tools.demo.output import Seen, print_new, summary, write_outputs
 from rozyn_estimator.tools.options import (
     add_departure_options,
     add_vehicle_error_options,
@@ -145,7 +145,7 @@ def node_values(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, Any
     by the nodes' own rules (ConfigError names a bad one) before anything starts."""
     from rozyn_estimator.online import EstimatorConfig
     from rozyn_estimator.parameters import build
-    from rozyn_estimator.tools.trial import VEHICLE_ERRORS
+    from rozyn_estimator.tools.cars import HALF_ERRORS
     from sim_node.node import SimNodeOptions, sim_config
 
     told, vehicle = _vehicle_values(args)  # the estimator is told the vehicle with the *_error options
@@ -153,7 +153,7 @@ def node_values(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, Any
     if errors and "vehicle.model" in vehicle:
         raise ConfigError("the --*-error options change the half car's values; the full car takes none")
     for key, error in errors.items():
-        told |= {f"vehicle.{name}": told[f"vehicle.{name}"] * (1.0 + error) for name in VEHICLE_ERRORS[key]}
+        told |= {f"vehicle.{name}": told[f"vehicle.{name}"] * (1.0 + error) for name in HALF_ERRORS[key]}
     estimator = {"speed_topic": "sim/speed", "window_s": args.window_s, "qos_depth": QUEUE_DEPTH, **told}
     sim = {"time_mode": "sim", "real_time_factor": args.real_time_factor, "duration_s": args.duration_s,
            "wait_for_subscribers": True, "road.kind": args.road, "road.amplitudes": args.amplitudes,

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from rozyn_estimator.online import Layout
-from rozyn_estimator.tools.replay_outputs import inertia_values
+from rozyn_estimator.tools.replay.outputs import inertia_values
 
 NS = 1_000_000_000
 HALF_ROWS = (("m", 1, " kg"), ("Iyy", 1, " kg m²"), ("lf", 4, " m"))  # (symbol, digits, unit)
@@ -89,8 +89,8 @@ def write_outputs(out_dir: Path, updates: Sequence[Any], seen: Seen, args: argpa
     """``updates.csv`` as ``rozyn replay`` writes it, and ``estimates.png``; prints their paths."""
     import csv
 
-    from rozyn_estimator.tools.replay_outputs import ReplayedUpdate, csv_columns, csv_row
-    from rozyn_estimator.tools.replay_plot import PLOT_NAME, matplotlib_available, plot_estimates
+    from rozyn_estimator.tools.replay.outputs import ReplayedUpdate, csv_columns, csv_row
+    from rozyn_estimator.tools.replay.plot import PLOT_NAME, matplotlib_available, plot_estimates
 
     out_dir.mkdir(parents=True, exist_ok=True)
     with (out_dir / "updates.csv").open("w", newline="") as f:

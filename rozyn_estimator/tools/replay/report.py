@@ -12,7 +12,7 @@ import numpy as np
 
 from rozyn_estimator.bag import absolute_topic
 from rozyn_estimator.online import LEVEL_NAMES, NS
-from rozyn_estimator.tools.replay_outputs import (
+from rozyn_estimator.tools.replay.outputs import (
     PUBLISHED_TOPIC,
     TRUTH_TOPIC,
     ReplayResult,

@@ -1,7 +1,7 @@
 """``rozyn replay`` of a fleet: several bags, or directories of bags, in parallel.
 
 Each bag is replayed exactly as ``rozyn replay BAG`` does it
-(:func:`~rozyn_estimator.tools.replay_feed.replay_bag`) into ``<out>/<bag name>/``
+(:func:`~rozyn_estimator.tools.replay.feed.replay_bag`) into ``<out>/<bag name>/``
 (``updates.csv``, ``estimates/``, ``estimates.png``), on all local cores
 (:func:`~rozyn_estimator.tools.trial.parallel_map`) or on the workers of a Dask cluster
 (``--scheduler``, as ``rozyn study``: :func:`~rozyn_estimator.tools.study.work.connect_scheduler`).
@@ -29,8 +29,8 @@ from typing import Any
 from rozyn_estimator.bag.reader import BAG_SUFFIXES
 from rozyn_estimator.errors import BagError
 from rozyn_estimator.online import LEVEL_NAMES, OK
-from rozyn_estimator.tools.replay_feed import ReplayOptions, check_options, replay_bag
-from rozyn_estimator.tools.replay_outputs import ReplayResult, published_estimate, utc
+from rozyn_estimator.tools.replay.feed import ReplayOptions, check_options, replay_bag
+from rozyn_estimator.tools.replay.outputs import ReplayResult, published_estimate, utc
 
 FLEET_CSV = "fleet.csv"
 STATUSES = ("ok", "no estimate", "failed")  # an estimate published / none published / not replayed
@@ -211,7 +211,7 @@ def run_fleet(bags: Sequence[Path], args: argparse.Namespace) -> int:
 
 
 def _local_rows(tasks: Sequence[FleetTask], jobs: int | None, progress: bool) -> Iterator[FleetRow]:
-    from rozyn_estimator.tools.trial import parallel_map
+    from rozyn_estimator.tools.trial.run import parallel_map
 
     yield from parallel_map(replay_task, tasks, jobs, progress, "bag")
 

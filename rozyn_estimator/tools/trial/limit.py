@@ -28,9 +28,10 @@ from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method.full import FULL_PARAM_NAMES
 from rozyn_estimator.method.full.refine import FullRefinement, refine_full
 from rozyn_estimator.method.likelihood.spectra import Spectra, window_spectra
-from rozyn_estimator.tools.trial import parallel_map, parse_seeds
-from rozyn_estimator.tools.trial_full import LABELS, FullTrialSpec, simulate_full, spec_from_args
-from rozyn_estimator.vehicle_full import CORNERS, FullTolerances
+from rozyn_estimator.tools.cars import FULL
+from rozyn_estimator.tools.trial.run import parallel_map, parse_seeds, simulate
+from rozyn_estimator.tools.trial.spec import TrialSpec
+from rozyn_estimator.vehicle_full import CORNERS, FullTolerances, FullVehicle
 
 _Z_MODEL = 3.0  # a departure beyond this many standard errors: the model's own bias
 
@@ -68,18 +69,18 @@ class Limit:
         return np.full(5, np.nan) if p is None else p - self.truth
 
 
-def record_spectra(item: tuple[FullTrialSpec, int]) -> tuple[Spectra, np.ndarray, tuple[int, ...]]:
+def record_spectra(item: tuple[TrialSpec, int]) -> tuple[Spectra, np.ndarray, tuple[int, ...]]:
     """One seed's record: (its spectra in the refinement's band, its speed per sample [m/s],
     the channels' corners)."""
     spec, seed = item
-    accel, speed, channels, _ = simulate_full(spec, seed)
+    block = simulate(spec, seed)
     cfg = spec.pipeline_config().likelihood
-    fs = spec.sim.rate_hz
-    sensors = tuple(CORNERS.index(c) for c in channels)
-    return window_spectra(accel, fs, cfg.band_at(fs), cfg.taper), speed, sensors
+    fs = spec.rate_hz
+    sensors = tuple(CORNERS.index(c) for c in block.channels)
+    return window_spectra(block.accel_mps2, fs, cfg.band_at(fs), cfg.taper), block.speed_mps, sensors
 
 
-def infinite_data_limit(spec: FullTrialSpec, seeds: Sequence[int], jobs: int | None = None,
+def infinite_data_limit(spec: TrialSpec, seeds: Sequence[int], jobs: int | None = None,
                         progress: bool = False) -> Limit:
     """The fit to the periodogram matrices averaged over ``seeds``' records of ``spec``."""
     if not seeds:
@@ -92,16 +93,18 @@ def infinite_data_limit(spec: FullTrialSpec, seeds: Sequence[int], jobs: int | N
     mean = Spectra(last.freq_hz, total / len(seeds), last.fs_hz, last.n_samples, last.window_dft, last.dft,
                    last.first_bin)
     window = np.zeros((last.n_samples, len(sensors)))  # its length only: the spectra are given
-    told = dataclasses.replace(spec.vehicle, tolerances=cast(FullTolerances, FullTolerances.none()))
+    vehicle = spec.estimator_vehicle
+    assert isinstance(vehicle, FullVehicle)
+    told = dataclasses.replace(vehicle, tolerances=cast(FullTolerances, FullTolerances.none()))
     ref = refine_full(window, last.fs_hz, told, sensors, spec.truth, speed,
                       spec.pipeline_config().likelihood, spectra=mean)
     return Limit(ref, spec.truth, len(seeds))
 
 
-def format_limit(spec: FullTrialSpec, limit: Limit) -> str:
+def format_limit(spec: TrialSpec, limit: Limit) -> str:
     """The readable report: per parameter the truth, the limit, its departure and standard error."""
-    s = spec.sim
-    lines = [f"full car, infinite-data limit: {s.road.kind} class {s.road.road_class} ({s.road.amplitudes}), "
+    s = spec
+    lines = [f"full car, infinite-data limit: {s.road} class {s.road_class} ({s.amplitudes}), "
              f"{s.speed_kmh:g} km/h, {s.duration_s:g} s records at {s.rate_hz:g} Hz, the periodogram "
              f"averaged over {limit.n} seed(s)", ""]
     ref = limit.refinement
@@ -109,22 +112,22 @@ def format_limit(spec: FullTrialSpec, limit: Limit) -> str:
         return "\n".join([*lines, f"the fit failed: {ref.reason}"])
     se, dep, params = limit.standard_error, limit.departure, limit.truth + limit.departure
     lines.append(f"{'parameter':<26}{'truth':>10}{'limit':>13}{'departure':>12}{'std error':>11}{'z':>7}")
-    for i, label in enumerate(LABELS):
+    labels = [f"{p.description} [{p.unit}]" for p in FULL.params]
+    for i, label in enumerate(labels):
         lateral = i == 4
         shown = f"{1e3 * dep[i]:+.2f} mm" if lateral else f"{100 * dep[i] / limit.truth[i]:+.3f} %"
         error = f"{1e3 * se[i]:.2f} mm" if lateral else f"{100 * se[i] / limit.truth[i]:.3f} %"
         lines.append(f"{label:<26}{limit.truth[i]:>10.4g}{params[i]:>13.6g}{shown:>12}{error:>11}"
                      f"{dep[i] / se[i]:>+7.1f}")
-    beyond = [label.split(" [")[0] for i, label in enumerate(LABELS) if abs(dep[i]) > _Z_MODEL * se[i]]
+    beyond = [p.description for i, p in enumerate(FULL.params) if abs(dep[i]) > _Z_MODEL * se[i]]
     lines += ["", f"the model's own bias: {', '.join(beyond)} (beyond {_Z_MODEL:g} standard errors)" if beyond
               else f"no departure beyond {_Z_MODEL:g} standard errors: what single estimates' means show "
                    "beyond this is the records' own scatter"]
     return "\n".join(lines)
 
 
-def run(args: argparse.Namespace) -> int:
-    """``rozyn trial --model full --limit``."""
-    spec = spec_from_args(args)
+def run(spec: TrialSpec, args: argparse.Namespace) -> int:
+    """``rozyn trial --model full --limit`` of ``spec`` (the options' trial)."""
     if spec.method != "likelihood":
         raise ConfigError("--limit: the likelihood refinement's limit (--method likelihood)")
     seeds = parse_seeds(args.seeds if args.seeds is not None else str(args.seed))
