@@ -23,7 +23,7 @@ from rozyn_estimator.method import METHODS, PipelineConfig
 from rozyn_estimator.online import CUSTOM_DATA_KEY, EstimatorConfig, OnlineConfig, OnlineEstimator
 from rozyn_estimator.tools import cli
 from rozyn_estimator.tools.replay import replay
-from rozyn_estimator.tools.replay_outputs import CSV_COLUMNS
+from rozyn_estimator.tools.replay.outputs import CSV_COLUMNS
 from sim_node.simulation import SimConfig, Simulation
 
 NS = 1_000_000_000
@@ -348,11 +348,17 @@ def test_sample_bags_estimate_the_recorded_truth(name):
 
 @pytest.mark.parametrize("name", (*SAMPLES, "full-iso-a-100kmh"))
 def test_sample_bags_replay_to_the_estimates_the_node_published(name):
-    """As recorded (the likelihood refinement): the node's estimates bit for bit (a change of
-    the method calls for the samples to be made again, bags/README.md), each within three of its
-    published std of the truth, the mass, pitch inertia and l_f within 2 %; with one BLAS
-    thread as the node whatever the caller's: with two, a BLAS library splits its sums
-    otherwise and the full car's estimates differed from the node's in their sixth digit."""
+    """As recorded (the likelihood refinement): the node's estimates (a change of the method
+    calls for the samples to be made again, bags/README.md), each within three of its published
+    std of the truth, the mass, pitch inertia and l_f within 2 %; with one BLAS thread as the
+    node whatever the caller's: with two, a BLAS library splits its sums otherwise and the full
+    car's estimates differed from the node's in their sixth digit.
+
+    Bit for bit on a CPU like the recording one; on another, numpy's and BLAS's vector kernels
+    sum in another order, the last bits differ and the fits' stopping rules carry that to at
+    most 3e-5 of a std (measured on a machine other than the recording one). The bound here,
+    10⁻³ std, is far below what other samples, another window or other settings move (a
+    window 5 s apart moves the estimate by about 0.3 std)."""
     from threadpoolctl import threadpool_info, threadpool_limits
 
     from rozyn_estimator.online import update
@@ -372,10 +378,10 @@ def test_sample_bags_replay_to_the_estimates_the_node_published(name):
     assert result.config == config and len(result.published) == 10
     published = {u.update.stamp_ns: u.update.params for u in result.published}
     assert sorted(published) == sorted(result.recorded)
-    for stamp, params in published.items():
-        assert np.array_equal(params, result.recorded[stamp]), (stamp, params, result.recorded[stamp])
     params = np.array([u.update.estimate.params for u in result.published])
     std = np.array([u.update.estimate.std for u in result.published])
+    recorded = np.array([result.recorded[u.update.stamp_ns] for u in result.published])
+    assert np.all(np.abs(params - recorded) <= 1e-3 * std), np.max(np.abs(params - recorded) / std)
     assert np.all(np.abs(params - result.truth) <= 3 * std), (params - result.truth) / std
     body = [0, 1, 2] if len(result.truth) == 3 else [0, 2, 3]  # m, I_yy, l_f
     relative = params[:, body] / np.array(result.truth)[body] - 1
