@@ -1,7 +1,7 @@
 """How the simulated vehicle departs from the estimator's model, the way real vehicles do.
 
 The estimator models the exact linear half car (or full car) with ideal, synchronised
-accelerometers. A real vehicle departs from it; the simulator can too (issue 10), so that
+accelerometers. A real vehicle departs from it; the simulator can too, so that
 the estimator's published uncertainty can be tested against a plant it does not describe
 exactly. The estimator is never told: its vehicle file stays nominal. Every default is the
 exact vehicle, and a run with every departure off is bit for bit the run without them.
