@@ -125,6 +125,23 @@ def test_no_import_cycle():
         pytest.fail(f"import cycle: {' -> '.join(exc.args[1])}")
 
 
+# Finer rules inside the tools: replaying a recorded bag needs no simulator.
+NOT_IMPORTED = {f"{PKG}.tools.replay": ("sim_node",)}
+
+
+@pytest.mark.parametrize("name", sorted(n for n in MODULES if any(n.startswith(p) for p in NOT_IMPORTED)))
+def test_tools_keep_their_finer_rules(name):
+    forbidden = next(v for p, v in NOT_IMPORTED.items() if name.startswith(p))
+    assert not {t for t in _imports(name) if t.split(".")[0] in forbidden}, name
+
+
+def test_no_folder_holds_more_than_15_modules():
+    """Group modules by concern in sub-packages instead (tools/trial/, method/full/uncertainty/ …)."""
+    folders = {p.parent for pkg in (PKG, "sim_node") for p in (ROOT / pkg).rglob("*.py")}
+    crowded = {str(f.relative_to(ROOT)): n for f in folders if (n := len(list(f.glob("*.py")))) > 15}
+    assert crowded == {}
+
+
 def test_no_module_is_too_long():
     long = {n: len(p.read_text().splitlines()) for n, p in MODULES.items()}
     assert {n: k for n, k in long.items() if k > 420} == {}
