@@ -4,8 +4,8 @@ A configuration dataclass declares each of its fields with :func:`param` and cal
 :func:`check` in ``__post_init__``. Everything that shows or takes the value uses that
 one description: the ROS nodes declare their parameters from it
 (:mod:`rozyn_estimator.ros.glue`), replay, demo and a bag's stored configuration build
-the same dataclasses (so the same rules apply), and the README's parameter tables are
-generated from it (``rozyn_estimator.tools.param_tables``).
+the same dataclasses (so the same rules apply), and the parameter reference's tables
+(docs/parameters.md) are generated from it (``rozyn_estimator.tools.param_tables``).
 
 :func:`check` first checks each field against its description (type, finite, range,
 choices, length), then the class' cross-field rules, each a predicate evaluated lazily
@@ -66,7 +66,7 @@ class Param:
     length: int | None = None
 
     def range_text(self) -> str:
-        """The range as a README cell: ``[0.1, 3600]``, ``> 0``, ``a | b``."""
+        """The range as a table cell: ``[0.1, 3600]``, ``> 0``, ``a | b``."""
         if self.choices:
             return " \\| ".join(self.choices)
         if self.low is not None and self.high is not None:

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The refined estimator on the thesis' whole grid: its section of ``docs/RESULTS.md``, its
+"""The refined estimator on the thesis' whole grid: its section of ``docs/results.md``, its
 figures in ``docs/figures/``, and the headline the README quotes.
 
     .venv/bin/python scripts/refined_report.py --run    # run the two studies (about 15 min), then write
@@ -15,7 +15,7 @@ The studies (``out/`` is git-ignored), both on Gaussian roads with 10 % sensor n
   (``scripts/vehicle_exact.yaml``: every tolerance zero), at 30, 60 and 100 km/h.
 
 The section sits between the markers ``<!-- refined-study -->`` and
-``<!-- /refined-study -->`` of RESULTS.md (added before the comparison section if absent);
+``<!-- /refined-study -->`` of results.md (added before the comparison section if absent);
 every number in it is computed here from the results.
 """
 
@@ -198,7 +198,7 @@ def section(refined: Run, rozyn: Run, exact: Run) -> str:
 
 def write(refined: Run, rozyn: Run, exact: Run, docs: Path) -> None:
     copy_figures(refined, FIGURES, docs / "figures")
-    results = docs / "RESULTS.md"
+    results = docs / "results.md"
     text = results.read_text()
     block = section(refined, rozyn, exact)
     if BEGIN in text:

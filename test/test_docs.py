@@ -1,4 +1,5 @@
-"""The README documents every topic and parameter the nodes have, and its commands exist."""
+"""The docs: the parameter reference matches what the nodes declare, the README is short and
+starts with its two commands, every relative link resolves, and no page is a diary."""
 
 from __future__ import annotations
 
@@ -22,11 +23,13 @@ from sim_node.node import SimNode
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")), ROOT / "bags" / "README.md"]
 BUILT_IN = {"use_sim_time", "start_type_description_service"}
 
 
-def test_readme_parameter_tables_are_generated_from_the_descriptions():
-    assert param_tables.render(README) == README, "run: python -m rozyn_estimator.tools.param_tables --write"
+def test_the_parameter_tables_are_generated_from_the_descriptions():
+    page = param_tables.PAGE.read_text()
+    assert param_tables.render(page) == page, "run: python -m rozyn_estimator.tools.param_tables --write"
 
 
 @pytest.mark.ros
@@ -66,3 +69,48 @@ def test_topics_and_commands_are_documented():
     assert "scripts/test" in (ROOT / ".ci" / "run").read_text()  # CI runs the README's command
     for script in re.findall(r"^(scripts/[\w.]+)", README, flags=re.M):
         assert (ROOT / script).exists(), script
+
+
+def test_the_readme_is_short_and_starts_with_its_two_commands():
+    lines = README.splitlines()
+    assert len(lines) <= 300, len(lines)
+    assert "scripts/demo" in "\n".join(lines[:12]) and "scripts/test" in "\n".join(lines[:12])
+
+
+def _slug(heading: str) -> str:
+    """A heading's anchor as GitHub makes it: lower case, punctuation dropped, spaces to '-'."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def _anchors(page: Path) -> set[str]:
+    text = re.sub(r"^```.*?^```", "", page.read_text(), flags=re.M | re.S)  # no headings in code
+    return {_slug(m.group(1)) for m in re.finditer(r"^#{1,6}\s+(.+?)\s*$", text, flags=re.M)}
+
+
+def _links(page: Path) -> list[str]:
+    text = re.sub(r"^```.*?^```", "", page.read_text(), flags=re.M | re.S)
+    text = re.sub(r"`[^`\n]*`", "", text)  # inline code is not a link
+    return re.findall(r"\]\(([^)\s]+)\)", text)
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[str(p.relative_to(ROOT)) for p in PAGES])
+def test_every_relative_link_resolves(page):
+    broken = []
+    for link in _links(page):
+        if re.match(r"^[a-z]+:", link):
+            continue  # http(s), mailto: not ours to check offline
+        path, _, anchor = link.partition("#")
+        target = (page.parent / path).resolve() if path else page
+        if not target.exists() or (anchor and target.suffix == ".md" and anchor not in _anchors(target)):
+            broken.append(link)
+    assert not broken, broken
+
+
+DIARY = re.compile(r"\b(session|today|yesterday|issue \d+|issue's|20\d\d-\d\d-\d\d)\b", re.I)
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[str(p.relative_to(ROOT)) for p in PAGES])
+def test_no_page_is_a_development_diary(page):
+    """The docs say what is true now: no dates, work periods or issue numbers (history is git's)."""
+    found = [line.strip()[:80] for line in page.read_text().splitlines() if DIARY.search(line)]
+    assert not found, found

@@ -1,12 +1,13 @@
-"""The README's parameter tables, generated from the parameters' descriptions.
+"""The parameter reference's tables (``docs/parameters.md``), generated from the parameters'
+descriptions.
 
 Each node's parameters are described once, next to their fields (``param(...)`` in the
-config dataclasses); this renders them as Markdown tables between markers in README.md:
+config dataclasses); this renders them as Markdown tables between markers in the page:
 
-    .venv/bin/python -m rozyn_estimator.tools.param_tables          # check README is current
+    .venv/bin/python -m rozyn_estimator.tools.param_tables          # check the page is current
     .venv/bin/python -m rozyn_estimator.tools.param_tables --write  # rewrite its tables
 
-A test keeps README.md in sync with the descriptions (and the descriptions with what the
+A test keeps the page in sync with the descriptions (and the descriptions with what the
 nodes declare).
 """
 
@@ -21,7 +22,7 @@ from typing import Any
 
 from rozyn_estimator.parameters import Flat, Param, flatten
 
-README = Path(__file__).resolve().parents[2] / "README.md"
+PAGE = Path(__file__).resolve().parents[2] / "docs" / "parameters.md"
 VEHICLE_FILE = Flat("vehicle_file", "", Param(
     "vehicle YAML (flat or ROS params); when set it overrides the vehicle.* parameters", read_only=True))
 
@@ -76,28 +77,28 @@ def _marked(name: str) -> re.Pattern[str]:
     return re.compile(rf"(<!-- parameters:{name} -->\n)(.*?)(<!-- /parameters:{name} -->)", re.S)
 
 
-def render(readme: str) -> str:
-    """``readme`` with every marked table regenerated."""
+def render(page: str) -> str:
+    """``page`` with every marked table regenerated."""
     for name, params in node_parameters().items():
-        found = _marked(name).search(readme)
+        found = _marked(name).search(page)
         if found is None:
-            raise ValueError(f"README.md lacks its <!-- parameters:{name} --> block")
-        readme = readme[: found.start(2)] + table(params) + "\n" + readme[found.end(2):]
-    return readme
+            raise ValueError(f"{PAGE.name} lacks its <!-- parameters:{name} --> block")
+        page = page[: found.start(2)] + table(params) + "\n" + page[found.end(2):]
+    return page
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--write", action="store_true", help="rewrite README.md's tables")
+    parser.add_argument("--write", action="store_true", help=f"rewrite {PAGE.name}'s tables")
     args = parser.parse_args(argv)
-    text = README.read_text()
+    text = PAGE.read_text()
     new = render(text)
     if args.write:
-        README.write_text(new)
-        print(f"wrote {README}")
+        PAGE.write_text(new)
+        print(f"wrote {PAGE}")
         return 0
     if new != text:
-        print("README.md's parameter tables are out of date: run with --write", file=sys.stderr)
+        print(f"{PAGE}'s parameter tables are out of date: run with --write", file=sys.stderr)
         return 1
     return 0
 
