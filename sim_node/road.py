@@ -2,10 +2,18 @@
 
 A road is a height ``h(s)`` [m] along the distance ``s`` [m]. It is generated once on
 a uniform grid (spacing at most ``dx_m``) as a periodic sum of cosines by an inverse FFT
-(eqs 4-1 to 4-7), and read at any distances by linear interpolation — so it streams:
-any block of positions can be asked for, in any order, and the answer does not depend
-on how a run is cut into blocks. The true road of the sim is the piecewise-linear
+(eqs 4-1 to 4-7), and read at any distances by cubic (Catmull-Rom) interpolation — so it
+streams: any block of positions can be asked for, in any order, and the answer does not
+depend on how a run is cut into blocks. The true road of the sim is the piecewise-cubic
 profile through the grid points.
+
+Why cubic: a piecewise-linear profile adds images of the road's spectrum at multiples of
+the grid's wavenumber (20 cycles/m), seen by the plant and aliased into the sensors' band;
+they are not the road of the estimator's model, and with quiet sensors its model check
+saw them (with the plant's 500 Hz steps, p < 0.001 in a quarter of noise-free in-model
+runs). Catmull-Rom's images are smaller by the square of the grid's resolution of the
+road, at the same memory (measured: in-model runs with the 1 kHz plant gave p < 0.05 in
+7 % of 30 noise-free runs, 17 % with linear interpolation).
 
 - ``amplitudes="fixed"``: amplitude ``sqrt(2 Gd(n_i) dn)`` and a uniform random phase
   per component (eq 4-6, the thesis' generator; nearly deterministic statistics).
@@ -63,7 +71,7 @@ class RoadSpec:
     n_min_cpm: float = param(0.01, "lowest spatial frequency (w = 2 diverges at 0)", unit="cycles/m",
                              low=0.0, open_low=True, ros_name="")
     n_max_cpm: float = param(5.0, "highest spatial frequency", unit="cycles/m", ros_name="")
-    dx_m: float = param(0.05, "grid spacing at most", unit="m", low=0.0, open_low=True, ros_name="")
+    dx_m: float = param(0.025, "grid spacing at most", unit="m", low=0.0, open_low=True, ros_name="")
     laplace_nu: float = param(1.0, "Laplace road: variance of the section gamma variable (0: Gaussian)",
                               low=0.0, high=100.0, read_only=True)
     section_length_m: float = param(100.0, "Laplace road section length", unit="m", low=1.0, high=100_000.0,
@@ -120,6 +128,21 @@ def iso_coefficients(spec: RoadSpec, gd: np.ndarray, dn: float, rng: np.random.G
     return np.sqrt(gd * dn) * (rng.standard_normal(gd.size) + 1j * rng.standard_normal(gd.size))
 
 
+def catmull_rom_response(nu: np.ndarray) -> np.ndarray:
+    """The frequency response of Catmull-Rom interpolation (Keys' cubic convolution, a = -1/2)
+    at ``nu`` cycles per grid step: a spectrum read between the grid points is this times the
+    grid's (Park & Schowengerdt 1983). 1 at 0, 0.94 at a quarter cycle per step (5 cycles/m
+    on a 0.05 m grid), 0.49 at the grid's Nyquist frequency."""
+    nu = np.abs(np.asarray(nu, dtype=float))
+    f = np.maximum(nu, 0.01)  # below, the closed form cancels: its series, 1 - pi^4 f^4 / 5 (to 1e-11)
+    s = np.sinc
+    a = -0.5
+    pf2 = (np.pi * f) ** 2
+    s1, s2, s4 = s(f), s(2 * f), s(4 * f)
+    closed = (3.0 * (s1**2 - s2) + 2.0 * a * (3.0 * s2**2 - 2.0 * s2 - s4)) / pf2
+    return np.where(nu < 0.01, 1.0 - np.pi**4 / 5.0 * nu**4, closed)
+
+
 class Road:
     """A seeded road profile, read at any distances.
 
@@ -149,8 +172,11 @@ class Road:
             raise ValueError(f"coefficients must have shape ({n_grid // 2 + 1},), got "
                              f"{np.shape(coefficients)}")
         # The periodic ISO profile on the grid (eqs 4-6, 4-7), via one inverse FFT:
-        # irfft(X)[j] = (1/N) sum_k X_k e^{2 pi i k j / N} (hermitian) -> X_k = N/2 * coeff_k
-        self._grid = sfft.irfft(coefficients * (n_grid / 2.0), n=n_grid)
+        # irfft(X)[j] = (1/N) sum_k X_k e^{2 pi i k j / N} (hermitian) -> X_k = N/2 * coeff_k;
+        # divided by the cubic interpolation's response, so that the profile read between the
+        # grid points has the road's spectrum, not the interpolation's attenuation of it
+        gain = catmull_rom_response(np.arange(n_grid // 2 + 1) / n_grid)
+        self._grid = sfft.irfft(coefficients * (n_grid / 2.0) / gain, n=n_grid)
         self._sections: dict[int, np.ndarray] = {}
 
     def heights(self, s_m: np.ndarray) -> np.ndarray:
@@ -161,7 +187,11 @@ class Road:
         i0 = np.floor(pos).astype(np.intp)
         frac = pos - i0
         i0 %= n_grid  # pos can round up to n_grid
-        h = self._grid[i0] * (1.0 - frac) + self._grid[(i0 + 1) % n_grid] * frac
+        g = self._grid
+        before, p0, p1, after = g[(i0 - 1) % n_grid], g[i0], g[(i0 + 1) % n_grid], g[(i0 + 2) % n_grid]
+        # Catmull-Rom: the cubic through p0, p1 with slopes (p1 - before)/2, (after - p0)/2
+        h = p0 + 0.5 * frac * ((p1 - before) + frac * ((2.0 * before - 5.0 * p0 + 4.0 * p1 - after)
+                                                        + frac * (3.0 * (p0 - p1) + after - before)))
         if self.spec.kind == "laplace":
             h = h * self.envelope(s)
         return h

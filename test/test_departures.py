@@ -246,8 +246,8 @@ def test_departures_are_sim_node_parameters():
     (lambda: Departures(damper_ratio=0.0), r"departures.damper_ratio: must lie in \[0.2, 5\]"),
     (lambda: Departures(time_offset_s=0.5), "departures.time_offset_s"),
     (lambda: Departures(spring_reference_m=0.0), "departures.spring_reference_m: must lie in"),
-    (lambda: SimConfig(departures=Departures(lowpass_hz=300.0)), "departures: lowpass_hz must stay below"),
-    (lambda: TrialSpec(departures=Departures(lowpass_hz=260.0)), "departures: lowpass_hz"),
+    (lambda: SimConfig(departures=Departures(lowpass_hz=600.0)), "departures: lowpass_hz must stay below"),
+    (lambda: TrialSpec(departures=Departures(lowpass_hz=510.0)), "departures: lowpass_hz"),
 ])
 def test_invalid_departures(make, match):
     with pytest.raises(ConfigError, match=match):

@@ -77,6 +77,6 @@ def test_departures_reach_the_plant_and_the_sensors():
 
 
 def test_oversampling_picks_the_plant_rate():
-    assert SimConfig(rate_hz=100.0).oversample == 5
-    assert SimConfig(rate_hz=400.0).oversample == 2
+    assert SimConfig(rate_hz=100.0).oversample == 10
+    assert SimConfig(rate_hz=400.0).oversample == 3
     assert SimConfig(rate_hz=1000.0).oversample == 1
