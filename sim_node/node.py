@@ -34,6 +34,7 @@ from sensor_msgs.msg import Imu
 from rozyn_estimator.parameters import build, check, param
 from rozyn_estimator.ros import glue as ros_common
 from rozyn_estimator.vehicle_full import FullVehicle, any_vehicle_from_parameters
+from sim_node.sensors import MEMS_NOISE_MPS2
 from sim_node.simulation import SimConfig, Simulation
 
 NS = 1_000_000_000
@@ -87,7 +88,9 @@ class SimNodeOptions:
         check(self)
 
 
-NODE_DEFAULTS = SimConfig(seed=1)  # the node's defaults: SimConfig's, with seed 1
+# the node's defaults: SimConfig's, with seed 1 and a MEMS accelerometer's noise (SimConfig's own
+# default is exact sensors, for the studies of the method)
+NODE_DEFAULTS = SimConfig(seed=1, noise_std_mps2=MEMS_NOISE_MPS2)
 
 
 def _time(ns: int) -> Time:

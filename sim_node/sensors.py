@@ -26,6 +26,11 @@ from sim_node.departures import Departures
 
 GRAVITY_MPS2 = 9.80665
 LOWPASS_ORDER = 2
+# A consumer MEMS accelerometer's white noise, the simulator's and the tools' default: the
+# InvenSense MPU-6000's datasheet gives a noise density of 400 µg/√Hz, which a sensor sampled
+# at 100 Hz behind a ~40 Hz low-pass reads as 400e-6 g √40 ≈ 0.025 m/s² rms (7 % of the body's
+# vertical acceleration on an ISO A road at 100 km/h; automotive IMUs are within a factor of 2).
+MEMS_NOISE_MPS2 = 0.025
 
 
 class Accelerometers:

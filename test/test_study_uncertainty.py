@@ -74,7 +74,7 @@ def test_rozyn_trial_durations_s_repeats_a_row_of_the_refined_study(refined, cap
     row = _records(refined / "results.csv")[-1]
     capsys.readouterr()
     assert main(["trial", "--seed", row["seed"], "--speed-kmh", "100", "--durations-s", "20,40",
-                 "--method", "likelihood", "--json", "--jobs", "1"]) == 0
+                 "--method", "likelihood", "--noise-std-mps2", "0", "--json", "--jobs", "1"]) == 0
     trial = [json.loads(line) for line in capsys.readouterr().out.splitlines()][-1]
     assert trial["duration_s"] == float(row["duration_s"]) == 40.0
     for name in PARAM_NAMES:

@@ -48,6 +48,7 @@ from rozyn_estimator.tools.options import (
     departure_values,
     vehicle_error_values,
 )
+from sim_node.sensors import MEMS_NOISE_MPS2
 
 NS = 1_000_000_000
 # Subscription queues of the estimator and the recorder: at 20 x real time the sim sends
@@ -108,7 +109,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="road amplitudes (default: gaussian, a true random road)",
     )
     p.add_argument("--speed-kmh", type=float, default=100.0, help="vehicle speed (default: 100)")
-    p.add_argument("--noise-std-mps2", type=float, default=0.0, help="white sensor noise (default: 0)")
+    p.add_argument("--noise-std-mps2", type=float, default=MEMS_NOISE_MPS2,
+                   help=f"white sensor noise [m/s²] (default: {MEMS_NOISE_MPS2:g}, a consumer MEMS "
+                        "accelerometer's; 0: exact sensors)")
     p.add_argument("--seed", type=int, default=1, help="road seed (default: 1)")
     p.add_argument(
         "--real-time-factor", type=float, default=20.0, help="sim seconds per wall second (default: 20)"

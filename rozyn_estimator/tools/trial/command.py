@@ -28,6 +28,7 @@ from rozyn_estimator.tools.trial.report import format_trials
 from rozyn_estimator.tools.trial.run import parallel_map, parse_seeds, run_trials
 from rozyn_estimator.tools.trial.spec import TRIAL_ROADS, TrialSpec
 from sim_node.departures import Departures
+from sim_node.sensors import MEMS_NOISE_MPS2
 
 HELP = "simulate seeded runs and estimate from each"
 DESCRIPTION = ("Simulate the half car (or with --model full the full car) over seeded roads and run the "
@@ -36,7 +37,9 @@ DESCRIPTION = ("Simulate the half car (or with --model full the full car) over s
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_run_options(p, TRIAL_ROADS, amplitudes="fixed")
-    p.add_argument("--noise-std-mps2", type=float, default=0.0, help="white sensor noise (default: 0)")
+    p.add_argument("--noise-std-mps2", type=float, default=None,
+                   help=f"white sensor noise [m/s²] (default: {MEMS_NOISE_MPS2:g}, a consumer MEMS "
+                        "accelerometer's; 0 with --noise-fraction or a free decay; 0: exact sensors)")
     p.add_argument("--noise-fraction", type=float, default=0.0, metavar="F",
                    help="white sensor noise as a share of each channel's rms, e.g. 0.1 (default: 0)")
     p.add_argument("--method", choices=tuple(METHODS), default=None,
@@ -73,11 +76,19 @@ def trial_spec(args: argparse.Namespace) -> TrialSpec:
     return TrialSpec(
         road=args.road, road_class=args.road_class, amplitudes=args.amplitudes,
         laplace_nu=args.laplace_nu, waviness=args.waviness, speed_kmh=args.speed_kmh,
-        duration_s=args.duration_s, rate_hz=args.rate_hz, noise_std_mps2=args.noise_std_mps2,
+        duration_s=args.duration_s, rate_hz=args.rate_hz, noise_std_mps2=noise_std(args),
         noise_fraction=args.noise_fraction, vehicle=car.vehicle(args.vehicle),
         method=args.method or "likelihood", departures=Departures(**departure_values(args)),
         **vehicle_error_values(args),
     )
+
+
+def noise_std(args: argparse.Namespace) -> float:
+    """The absolute sensor noise: as given, else a MEMS accelerometer's (none when a relative
+    noise is given instead, and none in a free decay: the thesis' check of the method)."""
+    if args.noise_std_mps2 is not None:
+        return float(args.noise_std_mps2)
+    return 0.0 if args.noise_fraction > 0 or args.road == "free-decay" else MEMS_NOISE_MPS2
 
 
 def run(args: argparse.Namespace) -> int:
