@@ -166,7 +166,7 @@ def test_the_budgets_shortcut_keeps_the_contributions():
 
 
 def test_the_half_cars_model_check_warns_when_its_sensors_see_the_roll():
-    """Issue 13 deliverable 3: the half car on a full car. Its centreline (each axle's two
+    """The half car on a full car. Its centreline (each axle's two
     sensors averaged) fits; two sensors on the left side see the roll mode, and the half
     car's model check says so and names the full-vehicle model."""
     from rozyn_estimator.method import estimate

@@ -1,27 +1,21 @@
 """Does the full-car model describe the data? The goodness-of-fit check of each refined update.
 
-The half car's check (:mod:`rozyn_estimator.method.likelihood.fitcheck`) widened to k
-channels: in each of ``N_BANDS`` log-spaced bands the mean ``M_b`` of the whitened
-periodogram matrices ``L⁻¹ I Lᴴ⁻¹`` (``S = L Lᴴ`` the fitted model's) should be the k×k
-identity; the complex-Wishart likelihood-ratio statistic
+The half car's check (:mod:`rozyn_estimator.method.likelihood.fitcheck`) on k channels: the
+statistic is :func:`rozyn_estimator.method.likelihood.whiteness.whiteness` with the road's
+two tracks (rank 2), over the fit's means of neighbouring bins (a mean counts as the bins
+it holds). Misfit means power or coherence between the corners the model cannot produce:
+suspension or tyre values off the vehicle file's (the full car holds them fixed: its budget
+carries their tolerances at first order), a nonlinear suspension (its forces at combination
+frequencies), a sensor's gain or timing beyond what its tolerance lets the calibration
+absorb, a body that is not rigid between the sensors.
 
-    T = Σ_b 2 n_b (tr M_b - ln det M_b - k)
+Noise-free sensors. Four exact sensors on a rigid body span three motions: the fitted S is
+then singular in the fourth direction. Floors the fit left at zero are taken away and the
+dither (``whiteness``) fills the directions the road does not drive, to the model's
+resolution, so the check has its distribution there too.
 
-is χ² with ``k² B`` degrees of freedom less the fit's parameters, ``n_b`` the band's
-ordinates over the taper's neighbour correlation ``κ`` (the fit's means over neighbouring
-bins count as the bins they hold). Misfit means power or coherence between the corners the
-model cannot produce: suspension or tyre values off the vehicle file's (the full car holds
-them fixed: its budget carries their tolerances at first order), a nonlinear suspension
-(its forces at combination frequencies), a sensor's gain or timing beyond what its
-tolerance lets the calibration absorb, a body that is not rigid between the sensors.
-
-Not on noise-free data (the simulator's exact sensors, no real accelerometer's): four
-sensors on a rigid body then span three motions, S is singular in the fourth direction and
-the check has no distribution (the refinement carries none).
-
-Measured here (Table 5-1's full car, ISO A, 100 km/h, 120 s, 20 seeds): at 10 % sensor
-noise T = 115 ± 10 at 112 degrees of freedom in the model (p < 0.001 in none; 0.1 % and 1 %
-noise: 8 seeds each, none), 442 ± 43 with dampers twice as stiff in rebound (in every one).
+How often it warns in the model and how surely it sees departures: docs/uncertainty.md
+("When the model does not fit"), measured by ``test/test_model_check.py``.
 """
 
 from __future__ import annotations
@@ -29,37 +23,66 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import special
 
 from rozyn_estimator.method.full.whittle import FullWhittle
-from rozyn_estimator.method.likelihood.fitcheck import ALPHA, FITS, N_BANDS, NOT_COMPUTABLE, ModelFit
+from rozyn_estimator.method.likelihood.covariance import NOISE_AT_ZERO
+from rozyn_estimator.method.likelihood.fitcheck import ALPHA, FITS, NOT_COMPUTABLE, ModelFit, misfit
+from rozyn_estimator.method.likelihood.spectra import Spectra, band_power
+from rozyn_estimator.method.likelihood.whiteness import whiteness
 
 
-def full_model_fit(objective: FullWhittle, theta: np.ndarray, freq_hz: np.ndarray, kappa: float) -> ModelFit:
-    """The check at the fit's optimum ``theta``; ``freq_hz`` the objective's periodograms'
-    frequencies, ``kappa`` the taper's neighbour correlation (``neighbour_correlation``)."""
-    f = np.asarray(freq_hz, dtype=float)
-    W = objective.whitened_periodogram(theta)
-    k = objective.periodogram.shape[-1]
-    dof = max(1, k * k * N_BANDS - objective.model.n_params)
-    if W is None or not np.all(np.isfinite(W)):  # S singular somewhere: never "fits"
-        return ModelFit(math.nan, dof, math.nan, (float(f[0]), float(f[-1])), NOT_COMPUTABLE)
-    edges = np.geomspace(f[0], f[-1] * (1 + 1e-9), N_BANDS + 1)
-    starts = np.searchsorted(f, edges[:-1])  # f ascending: each band's ordinates are a run
-    counts = np.add.reduceat(objective.counts, starts)
-    M = np.add.reduceat(objective.counts[:, None, None] * W, starts, axis=0) / counts[:, None, None]
-    sign, log_det = np.linalg.slogdet(M)
-    trace = np.einsum("baa->b", M).real
-    per_band = 2.0 * counts / kappa * np.where(sign.real > 0, trace - log_det.real - k, np.inf)
-    statistic = float(np.sum(per_band))
-    if not math.isfinite(statistic):
-        return ModelFit(math.nan, dof, math.nan, (float(f[0]), float(f[-1])), NOT_COMPUTABLE)
-    p = float(special.chdtrc(dof, statistic))
-    worst = int(np.argmax(per_band))
-    band = (float(edges[worst]), float(min(edges[worst + 1], f[-1])))
-    verdict = FITS if p >= ALPHA else (
-        f"the full-car model does not fit the spectra (p = {p:.1g}; worst {band[0]:.2g}-{band[1]:.2g} Hz): "
-        "likely suspension or tyre values off the vehicle file's, a nonlinear suspension (dampers stiffer "
-        "in rebound, progressive springs), a sensor's gain or timing beyond its tolerance, or a body that is "
-        "not rigid between the sensors")
-    return ModelFit(statistic, dof, p, band, verdict)
+def full_model_fit(objective: FullWhittle, theta: np.ndarray, spectra: Spectra, step: int,
+                   kappa: float) -> ModelFit:
+    """The check at the fit's optimum ``theta``: ``spectra`` the window's (its DFT), ``step`` the
+    bins in each of the objective's periodogram means, ``kappa`` the taper's neighbour
+    correlation (``neighbour_correlation``)."""
+    f = spectra.freq_hz
+    if spectra.dft is None:
+        raise ValueError("the model-fit check needs the window's DFT (Spectra.dft)")
+    not_computable = ModelFit(math.nan, 0.0, math.nan, (float(f[0]), float(f[-1])), NOT_COMPUTABLE)
+    try:
+        S = objective.factored(theta)[0]
+        hess = objective.hess(theta)
+    except (ValueError, np.linalg.LinAlgError):  # S singular somewhere: never "fits"
+        return not_computable
+    model = objective.model
+    base = getattr(model, "model", model)  # the spectrum under a corner calibration's shares
+    # A floor the fit ran below the model's fixed one is at its boundary: it measures no noise
+    # (noise-free sensors), so the check takes it away, and the dither stands for the model's
+    # resolution there instead. One far below its channel's power is not free (as the half car's).
+    fitted = np.exp(theta[base.noise_slice])
+    floors = fitted + base.min_noise_psd
+    unknown = np.where(fitted < base.min_noise_psd, floors, 0.0)
+    k = S.shape[-1]
+    S = S - unknown[:, None] * np.eye(k)
+    floors = np.broadcast_to(floors - unknown, S.shape[:2])
+    free = np.ones(theta.size, dtype=bool)
+    free[base.noise_slice] = fitted > NOISE_AT_ZERO * band_power(spectra)
+    A = np.linalg.inv(hess[np.ix_(free, free)])
+    group = np.arange(f.size) // step
+    ones = np.ones(objective.counts.size)[:, None, None]
+
+    def components(check: np.ndarray | None, at: np.ndarray) -> np.ndarray:
+        # W's real and imaginary parts at the groups ``at`` (their inner product tr(W_i W_j)),
+        # whitened by the check's S; ∂S mapped to those groups only
+        linv = np.linalg.inv(np.linalg.cholesky((S if check is None else check)[at]))
+        dS = model.to_targets(objective.evaluated(theta)[1][free], at)
+        rows = objective.whitened(linv, dS, ones[: at.size])
+        parts = rows.reshape(rows.shape[0], 2, -1, k * k).transpose(0, 2, 1, 3)
+        return parts.reshape(rows.shape[0], -1, 2 * k * k)
+
+    d = spectra.dft / math.sqrt(spectra.n_samples * spectra.fs_hz)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        try:
+            found = whiteness(S, floors, 2, d, group, objective.counts, base.freq_hz, kappa, components, A,
+                              (hess - np.diag(objective.precision))[np.ix_(free, free)], unknown,
+                              spectra.window_dft)
+        except np.linalg.LinAlgError:
+            return not_computable
+    if not math.isfinite(found.statistic):
+        return not_computable
+    worst = int(np.argmax(found.per_band))
+    band = (float(found.edges_hz[worst]), float(min(found.edges_hz[worst + 1], f[-1])))
+    p = found.p_value
+    verdict = FITS if p >= ALPHA else misfit("full-car", p, band, found, "the rear sensors")
+    return ModelFit(found.statistic, found.dof, p, band, verdict, found.dithered)

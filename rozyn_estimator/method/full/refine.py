@@ -64,6 +64,7 @@ from rozyn_estimator.method.full.score import sandwich_ratio
 from rozyn_estimator.method.full.spectrum import BODY_NAMES, FullCarSpectrum
 from rozyn_estimator.method.full.uncertainty.calibrate import (
     HANDOFF,
+    Posterior,
     VehicleCalibration,
     calibrate_vehicle,
     sensor_groups,
@@ -74,6 +75,7 @@ from rozyn_estimator.method.full.whittle import FullWhittle, ridged, scoring
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.covariance import NOISE_AT_ZERO
 from rozyn_estimator.method.likelihood.fitcheck import ModelFit, neighbour_correlation
+from rozyn_estimator.method.likelihood.newton import aground
 from rozyn_estimator.method.likelihood.score import SandwichRatio
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, window_spectra
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
@@ -179,8 +181,8 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     if spectra.freq_hz.size < 50:
         raise _FitError(f"too few frequencies in {band[0]:g}-{band[1]:g} Hz")
     power = band_power(spectra)
-    freq, periodogram, counts = grouped(spectra.freq_hz, spectra.periodogram,
-                                        max(1, int(GROUP_HZ * y.shape[0] / fs + 1e-9)))
+    step = max(1, int(GROUP_HZ * y.shape[0] / fs + 1e-9))
+    freq, periodogram, counts = grouped(spectra.freq_hz, spectra.periodogram, step)
     kernel = kernel_m2(y.shape[0], fs, cfg.taper, counts)
     groups = sensor_groups(vehicle, sensors) if cfg.self_calibrate else ()
     corners = corner_keys(vehicle) if cfg.self_calibrate else ()
@@ -230,6 +232,10 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         run(_start_theta(model, objective, power, first_params, cfg.noise_start), first_iter, cold=True)
     if cfg.second_start and doubtful():
         run(_grid_start(model, objective, power, vehicle, cfg.noise_start), cfg.max_iter, cold=True)
+    if cfg.second_start and best is not None and np.isfinite(best.fun):
+        revived = aground(objective.fun, objective.jac, best.x, best.fun, model.noise_slice, power)
+        if revived is not None:
+            run(revived, max(1, cfg.max_iter - iterations))
     if best is not None and model.grid_hz > 0 and _noise_share(best.x, model, power).min() < NOISE_AT_ZERO:
         # nearly noise-free: S is nearly singular and the interpolation's small errors matter
         found, best = best.x, None
@@ -241,12 +247,13 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     if best is None or not np.isfinite(best.fun):
         raise _FitError("likelihood fit: no start gave a finite likelihood")
     theta, calibration, notes = best.x, None, []
+    posterior: Posterior | None = None  # the calibration's: the model check counts its values as fitted
     if assumed is not None and assumed.holds(theta):  # the model assumes its values already
         calibration = assumed.aged()
     elif calibrating:
         try:
-            theta, calibration = calibrate_vehicle(objective, theta, vehicle, groups, assumed, cfg.max_iter,
-                                                   corners)
+            theta, calibration, posterior = calibrate_vehicle(objective, theta, vehicle, groups, assumed,
+                                                              cfg.max_iter, corners)
         except (ValueError, np.linalg.LinAlgError) as exc:  # the first-order budget stands for them
             notes.append(f"calibration failed ({exc}): the tolerances' first-order budget stands")
             run(theta, max(1, cfg.max_iter - iterations), tol=cfg.tol)  # the fit, completed without it
@@ -282,8 +289,9 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         raise _FitError("likelihood fit: covariance not positive")
     factors = variance_factors(objective, theta, combos, spectra, share, cfg.taper)
     cov = np.sqrt(factors)[:, None] * cov * np.sqrt(factors)[None, :]
-    fit = None if share.max() < NOISE_AT_ZERO else \
-        full_model_fit(objective, theta, freq, neighbour_correlation(spectra.window_dft))  # else S singular
+    # a calibration's shares are checked with it: what they absorbed counts as fitted dof
+    checked, at = (objective, theta) if posterior is None else (posterior.objective, posterior.point)
+    fit = full_model_fit(checked, at, spectra, step, neighbour_correlation(spectra.window_dft))
     # uncalibrated values move from the model's vehicle; a misfit's corner calibration absorbed
     # structure (dampers stiffer in rebound moved l_f by 2 std): their first-order budget stands
     contributions, budget_theta = _contributions(objective, theta, theta_cov, model.vehicle, warm,

@@ -43,7 +43,7 @@ from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.covariance import NOISE_AT_ZERO, CovarianceError, kept
 from rozyn_estimator.method.likelihood.fitcheck import ModelFit, model_fit
 from rozyn_estimator.method.likelihood.model import CORNERS, HalfCarSpectrum
-from rozyn_estimator.method.likelihood.newton import Fits, noise_share
+from rozyn_estimator.method.likelihood.newton import Fits, aground, noise_share
 from rozyn_estimator.method.likelihood.objective import WhittleObjective
 from rozyn_estimator.method.likelihood.score import SandwichRatio
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, fast_length, window_spectra
@@ -221,6 +221,11 @@ def _refine(
         # Cold without a usable start: the coarse grid's two best points.
         for th0 in _grid_starts(objective, spectra, vehicle, cfg.noise_start)[: 2 if cfg.second_start else 1]:
             fits.run(th0)
+    if cfg.second_start and fits.best is not None and np.isfinite(fits.best.fun):
+        revived = aground(objective.fun, objective.jac, fits.best.x, fits.best.fun, slice(4, 6),
+                          objective.band_power)
+        if revived is not None:
+            fits.run(revived)
     if fits.best is not None and np.isfinite(fits.best.fun) and model.grid_step > 1 and \
             np.min(noise_share(fits.best.x, objective)) < NOISE_AT_ZERO:
         # Nearly noise-free data: S is nearly singular and the interpolated model's small
@@ -243,10 +248,10 @@ def _refine(
         if not found.converged:
             notes.append(f"likelihood calibration: not converged in {cfg.max_iter} iterations")
         _check(found.params, found.covariance, L)
-        # the published model's fit; the calibrated values are held by their priors: they
-        # absorb no misfit, and the check's degrees of freedom are the fit's own
-        n_free = int(kept(objective, model, theta, objective.fisher(theta)).sum())
-        fit = model_fit(found.objective, found.theta, n_free, found.calibration)
+        # the published model's fit: what its free parameters absorb (their priors holding the
+        # calibrated ones) sets the check's degrees of freedom
+        free = kept(found.objective, found.objective.model, found.theta, found.objective.fisher(found.theta))
+        fit = model_fit(found.objective, found.theta, free, found.calibration)
     except (_FitError, CovarianceError) as exc:
         return Refinement(status="failed", reason=str(exc), params=None, theta=theta,
                           names=tuple(model.names), iterations=iterations, starts=fits.starts)

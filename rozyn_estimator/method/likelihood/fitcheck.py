@@ -1,31 +1,26 @@
 """Does the half-car model describe the data? A goodness-of-fit check of each refined update.
 
-Whitened spectra. With ``C_k C_kᴴ = S_k`` the fitted model's spectral matrix (the taper's
-smoothing included) and ``d_k`` the window's (tapered, normalised) DFT, the whitened
-``w_k = C_k⁻¹ d_k`` are, under the model, complex Gaussian with identity covariance (NOTES:
-the standardised periodogram is complex Wishart). In each of ``B`` log-spaced bands the
-mean ``M_b = ⟨w wᴴ⟩`` should be the identity; the likelihood-ratio statistic of a complex
-Wishart sample against it,
+The statistic is :func:`rozyn_estimator.method.likelihood.whiteness.whiteness`: the window's
+spectra whitened by the fitted model should be white, band by band (a complex-Wishart
+likelihood ratio, χ² with the degrees of freedom the fit leaves). Misfit in a band means
+power or coherence the model cannot produce there: a nonlinear suspension (asymmetric
+dampers, progressive springs: their forces at combination frequencies are not driven
+coherently by the road), a body that rolls or a sensor off the centreline (the roll mode's
+power, incoherent between the channels), a time offset between the sensors (the
+cross-spectrum's phase, growing with frequency). :func:`misfit` names the cause whose
+pattern the misfit shows.
 
-    T = Σ_b 2 n_b (tr M_b - ln det M_b - 2),
-
-is χ² with ``4 B`` degrees of freedom for independent ordinates, less one for each
-parameter the fit adjusted (they absorb misfit). ``n_b`` counts the band's ordinates
-divided by the taper's correlation of neighbours (``κ = Σ_δ ρ_δ²``). Misfit in a band
-means power or coherence the model cannot produce there: a nonlinear suspension
-(asymmetric dampers, progressive springs: their forces at combination frequencies are
-not driven coherently by the road), a body that rolls or a sensor off the centreline
-(the roll mode's power, incoherent between the channels), a time offset between the
-sensors (the cross-spectrum's phase, growing with frequency).
+Noise floors. A floor the fit left at its lower boundary measures no noise (the simulator's
+exact sensors): the check takes it away, and the dither (``whiteness``) stands for the
+model's resolution there instead; the floor then absorbs nothing.
 
 Calibrated sensors. When the sensors' delay or relative gain are calibrated (their
 tolerance > 0), the fit absorbs them, so the spectra fit — but a calibrated value far
 from the vehicle file's (``|estimate| > 4 std``) is a departure the user should know of,
 and is reported with the cause it names.
 
-Measured here (120 s, 100 km/h, 10 % noise, 8 seeds): T ≈ 22 ± 4 in-model on Gaussian
-roads and 26 ± 5 on Laplace roads (21 degrees of freedom), 127 ± 17 with dampers twice
-as stiff in rebound, ≈ 1900 with the rear sensor 5 ms late.
+How often it warns in the model and how surely it sees departures: docs/uncertainty.md
+("When the model does not fit"), measured by ``test/test_model_check.py``.
 """
 
 from __future__ import annotations
@@ -34,12 +29,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import special
 
-from rozyn_estimator.method.likelihood.objective import WhittleObjective, cholesky2
+from rozyn_estimator.method.likelihood.covariance import CovarianceError, inverse_information
+from rozyn_estimator.method.likelihood.objective import WhittleObjective, whitened
 from rozyn_estimator.method.likelihood.uncertainty.calibration import Calibration
+from rozyn_estimator.method.likelihood.whiteness import Whiteness, whiteness
 
-N_BANDS = 8
 ALPHA = 1e-3  # a p-value below this: the model does not fit (a WARN)
 Z_DEPARTURE = 4.0  # a calibrated sensor value this many posterior std from nominal: a WARN
 FITS = "fits"
@@ -52,10 +47,11 @@ class ModelFit:
     """The check's outcome: the statistic, its p-value, the worst band, the verdict."""
 
     statistic: float
-    dof: int
+    dof: float  # the bands' components less what the fit absorbs (whiteness.absorbed)
     p_value: float
     worst_band_hz: tuple[float, float]
     verdict: str  # "fits", or what the data show and its likely cause
+    dithered: float = 0.0  # the share of the band where the model's resolution set a dither
 
     @property
     def ok(self) -> bool:
@@ -65,50 +61,61 @@ class ModelFit:
         def number(x: float) -> float | None:  # JSON has no NaN (a check that cannot be computed)
             return x if math.isfinite(x) else None
 
-        return {"statistic": number(self.statistic), "dof": self.dof, "p": number(self.p_value),
-                "worst_band_hz": list(self.worst_band_hz), "verdict": self.verdict}
+        return {"statistic": number(self.statistic), "dof": number(self.dof), "p": number(self.p_value),
+                "worst_band_hz": list(self.worst_band_hz), "verdict": self.verdict, "dithered": self.dithered}
 
 
-def model_fit(objective: WhittleObjective, theta: np.ndarray, n_free: int,
+def model_fit(objective: WhittleObjective, theta: np.ndarray, free: np.ndarray,
               calibration: tuple[Calibration, ...] = ()) -> ModelFit:
-    """The check at the fit's optimum ``theta`` (``n_free``: the parameters it adjusted)."""
+    """The check at the fit's optimum ``theta`` (``free``: the parameters it adjusted, a mask)."""
     spectra = objective.spectra
     if spectra.dft is None:
         raise ValueError("the model-fit check needs the window's DFT (Spectra.dft)")
-    S, _ = objective.model.spectrum(theta, derivatives=False)  # the full model, also for an auto fit
-    d = spectra.dft / math.sqrt(spectra.n_samples * spectra.fs_hz)
-    # w = L⁻¹ d with S = L Lᴴ (Cholesky, written out for 2x2: numpy's loops per matrix)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        l11, l21, l22 = cholesky2(S)
-        w1 = d[:, 0] / l11
-        w = np.column_stack([w1, (d[:, 1] - l21 * w1) / l22])
-    dof = max(1, 4 * N_BANDS - n_free)
     f = spectra.freq_hz
-    if not np.all(np.isfinite(w)):  # S singular somewhere: no whitening, no statistic (never "fits")
-        return ModelFit(math.nan, dof, math.nan, (float(f[0]), float(f[-1])), NOT_COMPUTABLE)
-    edges = np.geomspace(f[0], f[-1] * (1 + 1e-9), N_BANDS + 1)
-    kappa = neighbour_correlation(spectra.window_dft)
-    # f ascending: each band's bins are a run (never empty: the fit needs 50 bins or more)
-    starts = np.searchsorted(f, edges[:-1])
-    counts = np.diff(np.r_[starts, f.size])
-    # each band's mean of w wᴴ (the whitened periodogram, identity under the model)
-    M = np.add.reduceat(w[:, :, None] * w[:, None, :].conj(), starts, axis=0) / counts[:, None, None]
-    a, b = M[:, 0, 0].real, M[:, 1, 1].real
-    auto = a - np.log(a) + b - np.log(b) - 2.0
-    det = np.maximum(a * b - np.abs(M[:, 0, 1]) ** 2, 1e-300)
-    full = a + b - np.log(det) - 2.0
-    per_band = list(2.0 * counts / kappa * full)
-    cross_share = list(np.where(full > 0, 1.0 - auto / np.where(full > 0, full, 1.0), 0.0))
-    statistic = float(np.sum(per_band))
-    if not math.isfinite(statistic):  # never a verdict from a statistic that is not a number
-        return ModelFit(math.nan, dof, math.nan, (float(f[0]), float(f[-1])), NOT_COMPUTABLE)
-    p = float(special.chdtrc(dof, statistic))  # the χ² tail (stats.chi2.sf's, without its overhead)
-    worst = int(np.argmax(per_band))
-    band = (float(edges[worst]), float(min(edges[worst + 1], f[-1])))
-    return ModelFit(statistic, dof, p, band, _verdict(p, band, per_band, cross_share, calibration))
+    model = objective.model
+    # the full model, also for an auto fit; the fit's own evaluation where it has it at hand
+    cached = not (objective.fast or objective.auto)
+    S, dS = objective.model_at(theta) if cached else model.spectrum(theta, derivatives=True)
+    # a floor the fit ran below the model's fixed one is at its boundary: it measures no noise, so
+    # the check takes it away, and the dither stands for the model's resolution there instead
+    floors = np.exp(theta[4:6]) + model.min_noise_psd
+    zero = np.exp(theta[4:6]) < model.min_noise_psd
+    unknown = np.where(zero, floors, 0.0)
+    S = S - unknown[:, None] * np.eye(2)
+    floors = np.broadcast_to(floors - unknown, (f.size, 2))
+    mask, free = free, np.flatnonzero(free)
+
+    def components(check: np.ndarray | None, at: np.ndarray) -> np.ndarray:
+        # the fit's whitened ∂S rows where the check's S is the fit's (cached by its information)
+        if check is None and cached and not zero.any():
+            rows = objective.whitened_rows(theta)[mask].reshape(free.size, 4, -1)[:, :, at]
+        else:
+            rows = whitened((S if check is None else check)[at], dS[mask][:, at]).reshape(free.size, 4, -1)
+        return rows.transpose(0, 2, 1)
+
+    info = objective.fisher(theta)[np.ix_(free, free)]
+    prior = np.zeros(theta.size) if objective.prior is None else objective.prior.precision
+    try:
+        A = inverse_information(info)
+    except CovarianceError:
+        return ModelFit(math.nan, 0.0, math.nan, (float(f[0]), float(f[-1])), NOT_COMPUTABLE)
+    bins = np.arange(f.size)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        try:
+            found = whiteness(S, floors, 1, spectra.dft / math.sqrt(spectra.n_samples * spectra.fs_hz), bins,
+                              np.ones(f.size), f, neighbour_correlation(spectra.window_dft), components, A,
+                              info - np.diag(prior[free]), unknown, spectra.window_dft)
+        except np.linalg.LinAlgError:  # S (or S and its dither) singular somewhere: never "fits"
+            return ModelFit(math.nan, 0.0, math.nan, (float(f[0]), float(f[-1])), NOT_COMPUTABLE)
+    if not math.isfinite(found.statistic):  # never a verdict from a statistic that is not a number
+        return ModelFit(math.nan, found.dof, math.nan, (float(f[0]), float(f[-1])), NOT_COMPUTABLE)
+    worst = int(np.argmax(found.per_band))
+    band = (float(found.edges_hz[worst]), float(min(found.edges_hz[worst + 1], f[-1])))
+    verdict = _verdict(found.p_value, band, found, calibration)
+    return ModelFit(found.statistic, found.dof, found.p_value, band, verdict, found.dithered)
 
 
-def _verdict(p: float, band: tuple[float, float], per_band: list[float], cross_share: list[float],
+def _verdict(p: float, band: tuple[float, float], found: Whiteness,
              calibration: tuple[Calibration, ...]) -> str:
     causes = []
     for c in calibration:
@@ -121,15 +128,55 @@ def _verdict(p: float, band: tuple[float, float], per_band: list[float], cross_s
                               f"{c.std * 100:.1f} % relative to the front one (calibrated; check their "
                               "scale factors)")
     if p < ALPHA:
-        text = (f"the half-car model does not fit the spectra (p = {p:.1g}; worst "
-                f"{band[0]:.2g}-{band[1]:.2g} Hz)")
-        high = per_band[N_BANDS // 2:]
-        timing = np.mean(cross_share) > 0.5 and sum(high) > 2 * sum(per_band[: N_BANDS // 2])
-        likely = ("sensor timing (a time offset between the sensors) or their positions" if timing else
-                  "a nonlinear suspension (dampers stiffer in rebound, progressive springs), or a body that "
-                  "rolls with a sensor off the centreline (use the full-vehicle model)")
-        causes.append(f"{text}: likely {likely}")
+        causes.append(misfit("half-car", p, band, found, "the rear sensor"))
     return "; ".join(causes) if causes else FITS
+
+
+def misfit(model: str, p: float, band: tuple[float, float], found: Whiteness, late: str) -> str:
+    """What a misfit shows, and what to check: a likely cause only where its pattern singles
+    one out (measured at 10 % sensor noise, each departure alone, 100 km/h):
+
+    - two channels: the phase between them off, more so the higher the frequency (a time
+      offset: the misfit ≥ 80 % in their coherence and in quadrature to the model's
+      cross-spectrum, three times as much above the middle band as below);
+    - two channels: their ratio off alike at every frequency (a gain: ≥ 80 % in the coherence,
+      in phase with the model's cross-spectrum, no band with more than 40 % of it);
+    - power the road does not drive coherently through the model: in the worst bands the
+      coherence carries at most half its in-model share ((k - 1)/k: dampers twice as stiff in
+      rebound gave a quarter of it on the half car; the values told wrong 1.3 to 2 times it);
+    - otherwise a checklist, in the order the misfit's band suggests (the body modes below
+      3 Hz: the suspension's values; wheel hop above 6 Hz: the tyres and unsprung masses).
+    """
+    per_band = np.asarray(found.per_band)
+    half = per_band.size // 2
+    coherence = per_band * found.cross_share
+    cross = float(np.sum(coherence) / np.sum(per_band))
+    worst = np.argsort(per_band)[-2:]
+    worst_cross = float(np.sum(coherence[worst]) / np.sum(per_band[worst]))
+    in_model = (found.channels - 1) / found.channels
+    text = f"the {model} model does not fit the spectra (p = {p:.1g}; worst {band[0]:.2g}-{band[1]:.2g} Hz)"
+    if found.channels == 2 and cross >= 0.8:
+        quadrature = float(np.sum(coherence * found.quadrature) / np.sum(coherence))
+        if quadrature >= 0.8 and np.sum(per_band[half:]) > 3.0 * np.sum(per_band[:half]):
+            return (f"{text}: likely a time offset between the sensors (the phase between them is off, more "
+                    f"so the higher the frequency): check {late}'s clock and stamps")
+        if quadrature <= 0.2 and np.max(per_band) <= 0.4 * np.sum(per_band):
+            return (f"{text}: likely the sensors' relative gain (their ratio is off alike at every "
+                    "frequency): check their scale factors, or give their gains tolerances so that the "
+                    "estimator calibrates them")
+    if worst_cross <= 0.5 * in_model:
+        return (f"{text}: the sensors carry power the road does not drive through the model: check for a "
+                "nonlinear suspension (dampers stiffer in rebound than in compression) or motion the model "
+                "lacks (a body that rolls under sensors off the centreline: use the full-vehicle model)")
+    where = "the suspension's, tyres' and unsprung masses' values"
+    if band[1] <= 3.0:
+        where = "the suspension's stiffness and damping, then the tyres and unsprung masses"
+    elif band[0] >= 6.0:
+        where = "the tyres' stiffness and the unsprung masses, then the suspension's values"
+    return (f"{text}: check the vehicle file's values ({where}; or give them tolerances so that the "
+            "estimator calibrates them), the sensors' gains, positions and timing, and whether the "
+            "suspension is nonlinear or the body moves in a way the model lacks (sensors off the centreline "
+            "of a body that rolls: use the full-vehicle model)")
 
 
 def neighbour_correlation(window_dft: np.ndarray) -> float:

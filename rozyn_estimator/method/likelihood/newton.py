@@ -14,6 +14,9 @@ drives: 3-4 ms of a warm update's 22-30 ms offline; the estimates within 0.002 o
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
+
 import numpy as np
 from scipy.linalg import LinAlgError, cho_factor, cho_solve
 from scipy.optimize import OptimizeResult, minimize
@@ -34,6 +37,35 @@ _NEAR_STEPS = 10.0  # on at every bin from there when its Newton decrement is be
 def noise_share(theta: np.ndarray, objective: WhittleObjective) -> np.ndarray:
     """(front, rear) fitted noise floor, share of each channel's power in the band."""
     return np.exp(theta[4:6]) / objective.band_power
+
+
+_REVIVE_SHARES = 10.0 ** np.arange(-8, 0)  # the floors tried for one run aground, share of its power
+
+
+def aground(fun: Callable[[np.ndarray], float], jac: Callable[[np.ndarray], np.ndarray],
+            theta: np.ndarray, value: float, noise: slice, power: np.ndarray) -> np.ndarray | None:
+    """A start for a fit whose noise floor ran aground: θ with that floor at the best of a few
+    levels, where that beats the fit's optimum ``value`` at ``theta`` (else None).
+
+    A floor is its log in θ, and at a floor far below its channel's power the likelihood's
+    gradient in it vanishes: a fit that wandered there (a poor start, on noisy data) cannot
+    come back, and ends in a wrong basin with that channel noise-free (the model check then
+    rightly warns). Such a floor's likelihood still falls as the floor itself grows (the
+    gradient in the floor, not its log, is negative where raising it to 1e-4 of its channel's
+    power would gain a nat): only those are tried, so noise-free data cost one gradient."""
+    floors = np.exp(theta[noise])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope = jac(theta)[noise] / floors  # ∂ℓ/∂n: the chain rule's factor n taken out
+    stuck = np.flatnonzero((floors < 1e-4 * power) & (slope * 1e-4 * power < -1.0))
+    start, best = None, value
+    for i in stuck:
+        for share in _REVIVE_SHARES:
+            trial = theta.copy()
+            trial[noise.start + i] = math.log(share * power[i])
+            f = fun(trial)
+            if np.isfinite(f) and f < best:
+                start, best = trial, f
+    return start
 
 
 class Fits:

@@ -114,13 +114,22 @@ def sensor_groups(vehicle: FullVehicle, sensors: tuple[int, ...]) -> tuple[str, 
                  and (g != "delay" or both_axles))
 
 
+@dataclass(frozen=True)
+class Posterior:
+    """The augmented posterior (the fit's θ, then the calibrated values) and its mode: what the
+    model check counts as fitted (the calibrated values absorb misfit too)."""
+
+    objective: FullWhittle
+    point: np.ndarray
+
+
 def calibrate_vehicle(
     objective: FullWhittle, theta: np.ndarray, vehicle: FullVehicle, groups: tuple[str, ...],
     start: VehicleCalibration | None = None, max_iter: int = 100, corner_keys: tuple[str, ...] = (),
-) -> tuple[np.ndarray, VehicleCalibration]:
-    """(the fit's θ at the posterior's mode, the calibration) from the fit's optimum ``theta``
-    of ``objective``, whose model assumes the values of ``start`` (None: the vehicle file's,
-    ``vehicle``). Raises ValueError when the posterior is not finite there."""
+) -> tuple[np.ndarray, VehicleCalibration, Posterior]:
+    """(the fit's θ at the posterior's mode, the calibration, the posterior) from the fit's
+    optimum ``theta`` of ``objective``, whose model assumes the values of ``start`` (None: the
+    vehicle file's, ``vehicle``). Raises ValueError when the posterior is not finite there."""
     base = objective.model
     sensor_model = base.calibrating(groups)
     model = CornerCalibrating(sensor_model, vehicle, corner_keys) if corner_keys else sensor_model
@@ -168,7 +177,7 @@ def calibrate_vehicle(
     calibration = VehicleCalibration(groups, _every(fitted[:n_sensor], groups, k), calibrations,
                                      contributions, point[:5].copy(), converged, corner_keys=corner_keys,
                                      corner_shares=fitted[n_sensor:].copy())
-    return point[:n], calibration
+    return point[:n], calibration, Posterior(posterior, point)
 
 
 def _shares_valid(model: FullCarSpectrum | CornerCalibrating, point: np.ndarray) -> bool:
