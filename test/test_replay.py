@@ -335,15 +335,18 @@ def _sample(name: str) -> tuple[Path, EstimatorConfig]:
 
 @pytest.mark.parametrize("name", SAMPLES)
 def test_sample_bags_estimate_the_recorded_truth(name):
-    """Rozyn's pipeline alone (fast) on each sample: every estimate within 10 % of the truth
-    recorded on sim/ground_truth (on Gaussian roads its spread is about 10 %, README)."""
+    """Rozyn's pipeline alone (fast) on each sample: every estimate within three of its std of
+    the truth recorded on sim/ground_truth, and within 20 % (on Gaussian roads its spread is
+    5-10 %, docs/results.md)."""
     bag, config = _sample(name)
     assert config.online.window_s == 120.0 and config.speed_topic == "/sim/speed"
     result = replay(bag, config.replace(pipeline=METHODS["rozyn"]))
     assert result.truth == (1000.0, 2000.0, 1.2) and result.accel_messages == 30_000
     assert len(result.published) == 10  # every 5 s from 100 s (the window 80 % full) to 145 s
-    errors = np.array([u.update.estimate.params for u in result.published]) / result.truth - 1
-    assert np.all(np.abs(errors) < 0.10), errors
+    params = np.array([u.update.estimate.params for u in result.published])
+    std = np.array([u.update.estimate.std for u in result.published])
+    assert np.all(np.abs(params - result.truth) <= 3 * std), (params - result.truth) / std
+    assert np.all(np.abs(params / result.truth - 1) < 0.20), params / result.truth - 1
 
 
 @pytest.mark.parametrize("name", (*SAMPLES, "full-iso-a-100kmh"))
