@@ -205,6 +205,52 @@ def test_speed_varying_within_the_window_is_not_used(run):
     assert updates and all(not u.published and "speed varied" in u.message for u in updates)
 
 
+def _with_speed(run, speed_at, every: int = 10):
+    """The run fed with a speed sample every ``every`` samples, ``speed_at(k)`` its value (None:
+    none sent); the updates whose window is 80 % full, and the estimator."""
+    stamps, accel = run
+    est = online(speed_mps=0.0)
+    updates = []
+    for k, (t, (a, b)) in enumerate(zip(stamps.tolist(), accel.tolist(), strict=True)):
+        if k % every == 0 and (v := speed_at(k)) is not None:
+            est.add_speed(t, v)
+        updates += [est.compute(job) for job in (*est.add(0, t, a), *est.add(1, t, b))]
+    return [u for u in updates if u.window_fill >= 0.8], est
+
+
+def test_a_speed_topic_that_falls_silent_is_not_trusted(run):
+    """Speed at 10 Hz for the first 30 s, then none: every window from then on has a stretch
+    without a speed (longer than speed_silence_s) and is not used; sent throughout, all are."""
+    steady = 100 / 3.6
+    updates, _ = _with_speed(run, lambda k: steady)
+    assert len(updates) >= 20 and all(u.published for u in updates)
+    updates, _ = _with_speed(run, lambda k: steady if k < 3000 else None)
+    assert len(updates) >= 20
+    for u in updates:
+        assert not u.published and u.level == WARN and "speed topic was silent" in u.message, u.message
+    silent = [float(u.message.split("silent for ")[1].split(" s")[0]) for u in updates]
+    last_speed_ns = run[0][2990]  # the last one sent
+    since = np.array([(u.stamp_ns - last_speed_ns) / NS for u in updates])
+    np.testing.assert_allclose(silent, np.minimum(since, 60.0), atol=0.06)  # at most the window
+
+
+def test_a_speed_gap_shorter_than_the_limit_is_bridged(run):
+    """A 1.5 s gap in a 10 Hz speed topic is below the 2 s limit: the windows are used."""
+    updates, _ = _with_speed(run, lambda k: None if 5000 <= k < 5150 else 100 / 3.6)
+    assert len(updates) >= 20 and all(u.published for u in updates)
+
+
+@pytest.mark.parametrize(("value", "reason"), [
+    (1e9, "speed: outside 0-150 m/s"), (-3.0, "speed: outside 0-150 m/s"),
+    (float("nan"), "speed: not a number")])
+def test_speeds_outside_the_physical_range_are_dropped_and_counted(run, value, reason):
+    """A speed topic reading 1e9 m/s gave a made-up mass (23 177 ± 8 601 kg): now every such
+    sample is dropped and counted, and the windows it should have timed are not used."""
+    updates, est = _with_speed(run, lambda k: value)
+    assert est.dropped[reason] == 2000  # 200 s at 10 Hz
+    assert len(updates) >= 20 and all(not u.published and "no valid speed" in u.message for u in updates)
+
+
 @pytest.mark.parametrize(
     ("changes", "name"),
     [({"window_s": -1.0}, "window_s"), ({"update_period_s": 200.0}, "update_period_s"),

@@ -3,12 +3,22 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from rozyn_estimator.parameters import check, param
 
 MIN_SPEED_MPS = 0.1  # a known speed below walking pace is a typo (1e-308), not a drive
+MAX_SPEED_MPS = 150.0  # 540 km/h: above any road vehicle's; a speed topic reading more is corrupt
+
+
+def speed_problem(speed_mps: float) -> str | None:
+    """Why a speed sample [m/s] cannot be used (None: it can): not finite, or outside
+    0..:data:`MAX_SPEED_MPS` (a corrupt speed topic read 1e9 m/s)."""
+    if not math.isfinite(speed_mps):
+        return "not a number"
+    return None if 0.0 <= speed_mps <= MAX_SPEED_MPS else f"outside 0-{MAX_SPEED_MPS:g} m/s"
 
 
 @dataclass(frozen=True)
@@ -37,7 +47,10 @@ class OnlineConfig:
     max_speed_variation: float = param(0.1, "windows whose (max - min)/mean speed exceeds this are not used",
                                        low=0.001, high=10.0)
     speed_mps: float = param(0.0, "vehicle speed when no speed samples arrive; 0: unknown", unit="m/s",
-                             low=0.0, high=150.0)
+                             low=0.0, high=MAX_SPEED_MPS)
+    speed_silence_s: float = param(2.0, "once a speed topic has spoken, a window in which it is silent this "
+                                   "long is not used (its speed is unknown there)", unit="s",
+                                   low=0.01, high=3600.0)
 
     def __post_init__(self) -> None:
         check(self, (

@@ -16,7 +16,7 @@ four corners (:class:`~rozyn_estimator.online.records.Layout`). Updates fall due
 :meth:`OnlineEstimator.compute` runs the pipeline on it (any thread, in due order).
 :meth:`OnlineEstimator.report` gives one diagnostics message.
 
-Bad input is dropped and counted, never raised: non-finite values, duplicate stamps,
+Bad input is dropped and counted, never raised: non-finite values or speeds, duplicate stamps,
 stamps older than the channel's last (out of order: not also counted missing). A gap
 longer than ``max_gap_s`` or a stamp more than ``jump_back_s`` older than the last (bag
 loop, sim restart) resets the window, and the next report says so. A channel holds at
@@ -53,7 +53,7 @@ from rozyn_estimator.method import Estimate, PipelineConfig
 from rozyn_estimator.method.full import FullEstimate
 from rozyn_estimator.online.batch import SpeedSamples, clean_batch, trigger_of
 from rozyn_estimator.online.channel import Channel
-from rozyn_estimator.online.config import OnlineConfig
+from rozyn_estimator.online.config import OnlineConfig, speed_problem
 from rozyn_estimator.online.estimator_config import EstimatorConfig
 from rozyn_estimator.online.records import ERROR, NS, WARN, Health, Job, Layout, Level, Update, layout_of
 from rozyn_estimator.online.status import health_values, status
@@ -100,6 +100,7 @@ class OnlineEstimator:
         self._pipeline = pipeline or PipelineConfig()
         self._channels = tuple(Channel() for _ in self._layout.channels)
         self._speed = Channel()
+        self._speed_source = False  # any speed sample arrived (valid or not): a speed topic is in use
         self._next_due_ns: int | None = None
         self._dropped: Counter[str] = Counter()  # reason -> count, since start
         self._resets = 0
@@ -282,14 +283,12 @@ class OnlineEstimator:
         self._channels[channel].reject(reason)
 
     def _add_speed(self, stamp_ns: int, speed_mps: float) -> None:
-        if not math.isfinite(speed_mps) or speed_mps < 0:
-            self._dropped["speed: invalid speed"] += 1
-            return
-        ch = self._speed
-        if ch.last_ns is not None and stamp_ns <= ch.last_ns:
-            self._dropped["speed: out-of-order speed stamp"] += 1
-            return
-        ch.append(stamp_ns, speed_mps)
+        self._speed_source = True
+        ch, late = self._speed, self._speed.last_ns is not None and stamp_ns <= self._speed.last_ns
+        if problem := speed_problem(speed_mps) or ("out-of-order speed stamp" if late else None):
+            self._dropped[f"speed: {problem}"] += 1
+        else:
+            ch.append(stamp_ns, speed_mps)
 
     def _one_by_one(self, channels: np.ndarray, stamps: np.ndarray, values: np.ndarray, order: np.ndarray,
                     speed: SpeedSamples | None) -> list[tuple[Job, int]]:
@@ -315,7 +314,7 @@ class OnlineEstimator:
             if np.any(late):
                 t, v = job.speed
                 keep = ~np.isin(t, speed.stamps_ns[late])
-                job = Job(job.due_ns, job.samples, (t[keep], v[keep]), job.epoch)
+                job = Job(job.due_ns, job.samples, (t[keep], v[keep]), job.epoch, job.speed_source)
         return job, trigger
 
     # ------------------------------------------------------------- schedule
@@ -362,7 +361,7 @@ class OnlineEstimator:
             due = self._next_due_ns
             lo = due - window
             samples = tuple(ch.window(lo, due) for ch in self._channels)
-            jobs.append(Job(due, samples, self._speed.window(lo, due), self._epoch))
+            jobs.append(Job(due, samples, self._speed.window(lo, due), self._epoch, self._speed_source))
             self._next_due_ns = due + period
         return jobs
 

@@ -95,6 +95,7 @@ class Job:
     samples: tuple[tuple[np.ndarray, np.ndarray], ...]  # per channel (stamps_ns, values)
     speed: tuple[np.ndarray, np.ndarray]  # (stamps_ns, speed_mps), may be empty
     epoch: int = 0  # the window's generation: a reset since makes the job stale
+    speed_source: bool = False  # a speed topic has spoken (its silence in the window is then a fault)
 
     @property
     def front(self) -> tuple[np.ndarray, np.ndarray]:

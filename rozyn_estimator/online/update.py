@@ -72,6 +72,11 @@ def _compute(job: Job, names: Sequence[str], cfg: OnlineConfig, vehicle: Vehicle
             f"window {fill * 100:.0f} % full (need {need})"
         return Update(stamp, WARN if missing else OK, why, window_fill=fill, fs_hz=fs)
     speed: float | np.ndarray | None = cfg.speed_mps or None
+    silent = _speed_silence_s(job, t_ns) if job.speed_source else 0.0
+    if silent > cfg.speed_silence_s:
+        return Update(stamp, WARN, f"the speed topic was silent for {silent:.1f} s of the window (limit "
+                      f"{cfg.speed_silence_s:g} s; or sent no valid speed): its speed is unknown, not used",
+                      window_fill=fill, fs_hz=fs)
     if job.speed[1].size:
         s = job.speed[1]
         mean_speed = float(np.mean(s))
@@ -98,6 +103,13 @@ def _compute(job: Job, names: Sequence[str], cfg: OnlineConfig, vehicle: Vehicle
                       speed_mps)
     note = "; ".join(est.notes)
     return Update(stamp, WARN if note else OK, note or "estimate published", est, fill, fs, speed_mps)
+
+
+def _speed_silence_s(job: Job, t_ns: np.ndarray) -> float:
+    """The longest stretch of the window without a valid speed sample [s] (its ends included:
+    a speed that stopped before the window's end is as unknown there as a missing one)."""
+    edges = np.concatenate(([t_ns[0]], job.speed[0], [t_ns[-1]])).astype(float)
+    return float(np.max(np.diff(edges), initial=0.0)) / NS
 
 
 def _publishable(est: Estimate | FullEstimate, layout: Layout) -> bool:
