@@ -47,6 +47,7 @@ from rozyn_estimator.method.likelihood.newton import Fits, aground, noise_share
 from rozyn_estimator.method.likelihood.objective import WhittleObjective
 from rozyn_estimator.method.likelihood.score import SandwichRatio
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, fast_length, window_spectra
+from rozyn_estimator.method.likelihood.speedcheck import check_speed
 from rozyn_estimator.method.likelihood.uncertainty.augment import plan
 from rozyn_estimator.method.likelihood.uncertainty.budget import uncertainty
 from rozyn_estimator.method.likelihood.uncertainty.calibration import Calibration
@@ -252,6 +253,7 @@ def _refine(
         # calibrated ones) sets the check's degrees of freedom
         free = kept(found.objective, found.objective.model, found.theta, found.objective.fisher(found.theta))
         fit = model_fit(found.objective, found.theta, free, found.calibration)
+        notes += _speed_notes(model, spectra, cfg, theta, float(best.fun), fit, found.calibration)
     except (_FitError, CovarianceError) as exc:
         return Refinement(status="failed", reason=str(exc), params=None, theta=theta,
                           names=tuple(model.names), iterations=iterations, starts=fits.starts)
@@ -267,6 +269,20 @@ def _refine(
         contributions=found.contributions, model_fit=fit, sensitivities=found.sensitivities,
         sandwich=found.sandwich,
     )
+
+
+def _speed_notes(model: HalfCarSpectrum, spectra: Spectra, cfg: LikelihoodConfig, theta: np.ndarray,
+                 value: float, fit: ModelFit | None, calibration: tuple[Calibration, ...]) -> list[str]:
+    """The speed's check (:mod:`.speedcheck`) where the window doubts it: the model does not fit,
+    or a value calibrated far beyond its tolerance (a speed's error bends the sensors' timing).
+    A speed the data refute fails the refinement (:class:`_FitError`); a doubtful one is a note."""
+    far = any(abs(c.estimate) > 3.0 * c.tolerance for c in calibration if c.tolerance > 0)
+    if not ((fit is not None and not fit.ok) or far):
+        return []
+    found = check_speed(model, spectra, cfg, theta, value)
+    if found.wrong:
+        raise _FitError(found.text())
+    return [f"speed check: {found.text()}"] if found.doubtful else []
 
 
 def _grid_starts(
