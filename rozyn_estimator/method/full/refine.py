@@ -62,6 +62,7 @@ from rozyn_estimator.method.full.intermittency import variance_factors
 from rozyn_estimator.method.full.means import GROUP_HZ, coarse_fit, grouped, kernel_m2
 from rozyn_estimator.method.full.score import sandwich_ratio
 from rozyn_estimator.method.full.spectrum import BODY_NAMES, FullCarSpectrum
+from rozyn_estimator.method.full.speed import check_full_speed, speed_models
 from rozyn_estimator.method.full.uncertainty.calibrate import (
     HANDOFF,
     Posterior,
@@ -247,6 +248,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     if best is None or not np.isfinite(best.fun):
         raise _FitError("likelihood fit: no start gave a finite likelihood")
     theta, calibration, notes = best.x, None, []
+    uncalibrated = speed_models(model), best.x, float(best.fun)  # the speed check's, if it runs
     posterior: Posterior | None = None  # the calibration's: the model check counts its values as fitted
     if assumed is not None and assumed.holds(theta):  # the model assumes its values already
         calibration = assumed.aged()
@@ -292,6 +294,11 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     # a calibration's shares are checked with it: what they absorbed counts as fitted dof
     checked, at = (objective, theta) if posterior is None else (posterior.objective, posterior.point)
     fit = full_model_fit(checked, at, spectra, step, neighbour_correlation(spectra.window_dft))
+    if (fit is not None and not fit.ok) or (calibration is not None and calibration.departures()):
+        told = check_full_speed(uncalibrated[0], periodogram, counts, cfg, *uncalibrated[1:])
+        if told.wrong:
+            raise _FitError(told.text())
+        notes += [f"speed check: {told.text()}"] if told.doubtful else []
     # uncalibrated values move from the model's vehicle; a misfit's corner calibration absorbed
     # structure (dampers stiffer in rebound moved l_f by 2 std): their first-order budget stands
     contributions, budget_theta = _contributions(objective, theta, theta_cov, model.vehicle, warm,

@@ -144,6 +144,10 @@ class FullCarSpectrum:
         self._body_value: tuple[np.ndarray, ...] | None = None
         self.set_vehicle(vehicle)
 
+    @property
+    def settings(self) -> dict[str, Any]:  # the construction arguments but the frequencies (a copy)
+        return dict(self._settings)
+
     def regrid(self, freq_hz: np.ndarray, kernel_m2_hz2: np.ndarray | float,
                grid_hz: float) -> FullCarSpectrum:
         """The same model (the same θ) at other frequencies (``grid_hz`` 0: S at each)."""

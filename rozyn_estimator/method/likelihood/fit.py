@@ -47,7 +47,7 @@ from rozyn_estimator.method.likelihood.newton import Fits, aground, noise_share
 from rozyn_estimator.method.likelihood.objective import WhittleObjective
 from rozyn_estimator.method.likelihood.score import SandwichRatio
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, fast_length, window_spectra
-from rozyn_estimator.method.likelihood.speedcheck import check_speed
+from rozyn_estimator.method.likelihood.speedcheck import check_speed, half_car_speed
 from rozyn_estimator.method.likelihood.uncertainty.augment import plan
 from rozyn_estimator.method.likelihood.uncertainty.budget import uncertainty
 from rozyn_estimator.method.likelihood.uncertainty.calibration import Calibration
@@ -279,7 +279,7 @@ def _speed_notes(model: HalfCarSpectrum, spectra: Spectra, cfg: LikelihoodConfig
     far = any(abs(c.estimate) > 3.0 * c.tolerance for c in calibration if c.tolerance > 0)
     if not ((fit is not None and not fit.ok) or far):
         return []
-    found = check_speed(model, spectra, cfg, theta, value)
+    found = check_speed(*half_car_speed(model, spectra, cfg), theta, value)
     if found.wrong:
         raise _FitError(found.text())
     return [f"speed check: {found.text()}"] if found.doubtful else []

@@ -14,6 +14,7 @@ phase (though not in the same way at every frequency): a small discrepancy names
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,44 +62,58 @@ class SpeedCheck:
         return f"{said}, or a sensor's timing is off (the two shift the same phase): check both"
 
 
-def check_speed(model: HalfCarSpectrum, spectra: Spectra, cfg: LikelihoodConfig, theta: np.ndarray,
-                value: float, rounds: int = 12) -> SpeedCheck:
-    """The speed's check at the fit's optimum ``theta`` (its negative log likelihood ``value``).
+def check_speed(value_at: Callable[[float, np.ndarray], float],
+                refit: Callable[[float, np.ndarray], tuple[np.ndarray, float] | None],
+                theta: np.ndarray, value: float, rounds: int = 12) -> SpeedCheck:
+    """The speed's check at the fit's optimum ``theta`` (its negative log likelihood ``value``):
+    ``value_at(c, θ)`` the negative log likelihood with the speed scaled by ``c`` (inf where
+    it has none), ``refit(c, θ)`` the fit from θ at that scale (its optimum and value).
 
     Each round scans the conditional likelihood over the scales at the current θ and refits
     at the best one: a fit bent by a wrong speed sees the true one's peak only roughly at
     first (km/h as m/s: 1.27× in the first round), so it scans again from the refit."""
-    def objective(c: float) -> WhittleObjective:
-        scaled = model.variant(speed_mps=np.asarray(model.speed_mps) * c)
-        return WhittleObjective(scaled, spectra, cfg.spectra)
-
     scale, at, best_value = 1.0, theta, value
     for _ in range(rounds):
         with np.errstate(all="ignore"):
-            conditional = np.array([_value(objective(scale * float(c)), at) for c in _SCALES])
+            conditional = np.array([_finite(value_at, scale * float(c), at) for c in _SCALES])
         best = int(np.argmin(conditional))
         if _SCALES[best] == 1.0 or not conditional[best] < best_value - 1.0:
             break
-        refit = Fits(objective(scale * float(_SCALES[best])), cfg, cfg.tol)
-        refit.run(at)
-        if refit.best is None or not refit.best.fun < best_value:
+        found = refit(scale * float(_SCALES[best]), at)
+        if found is None or not found[1] < best_value:
             break
-        scale, at, best_value = scale * float(_SCALES[best]), refit.best.x, float(refit.best.fun)
+        scale, (at, best_value) = scale * float(_SCALES[best]), found
     if scale == 1.0:
         return SpeedCheck(1.0, 0.0)
     # the scale refined between its grid neighbours, the vehicle held
     step = math.log(_SCALES[1] / _SCALES[0])
-    found = optimize.minimize_scalar(lambda ln_c: _value(objective(math.exp(ln_c)), at),
-                                     bounds=(math.log(scale) - step, math.log(scale) + step),
-                                     method="bounded", options={"xatol": 1e-3})
-    if found.success and found.fun <= best_value:
-        scale, best_value = math.exp(found.x), float(found.fun)
+    line = optimize.minimize_scalar(lambda ln_c: _finite(value_at, math.exp(ln_c), at),
+                                    bounds=(math.log(scale) - step, math.log(scale) + step),
+                                    method="bounded", options={"xatol": 1e-3})
+    if line.success and line.fun <= best_value:
+        scale, best_value = math.exp(line.x), float(line.fun)
     return SpeedCheck(1.0 / scale, value - best_value)
 
 
-def _value(objective: WhittleObjective, theta: np.ndarray) -> float:
+def half_car_speed(model: HalfCarSpectrum, spectra: Spectra, cfg: LikelihoodConfig) -> tuple[
+        Callable[[float, np.ndarray], float], Callable[[float, np.ndarray], tuple[np.ndarray, float] | None]]:
+    """:func:`check_speed`'s two functions for the half car's model."""
+    def objective(c: float) -> WhittleObjective:
+        scaled = model.variant(speed_mps=np.asarray(model.speed_mps) * c)
+        return WhittleObjective(scaled, spectra, cfg.spectra)
+
+    def refit(c: float, theta: np.ndarray) -> tuple[np.ndarray, float] | None:
+        fits = Fits(objective(c), cfg, cfg.tol)
+        fits.run(theta)
+        return None if fits.best is None else (fits.best.x, float(fits.best.fun))
+
+    return (lambda c, theta: objective(c).fun(theta)), refit
+
+
+def _finite(value_at: Callable[[float, np.ndarray], float], c: float, theta: np.ndarray) -> float:
+    """``value_at(c, θ)``, inf where the model has no finite likelihood (S singular)."""
     try:
-        v = float(objective.fun(theta))
+        value = float(value_at(c, theta))
     except (ValueError, np.linalg.LinAlgError):
         return math.inf
-    return v if math.isfinite(v) else math.inf
+    return value if math.isfinite(value) else math.inf

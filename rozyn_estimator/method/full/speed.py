@@ -1,0 +1,35 @@
+"""The full car's speed check: :func:`rozyn_estimator.method.likelihood.speedcheck.check_speed`
+on the full car's likelihood (the rear wheels meet the front wheels' roads a wheelbase later)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.whittle import FullWhittle, scoring
+from rozyn_estimator.method.likelihood.config import LikelihoodConfig
+from rozyn_estimator.method.likelihood.speedcheck import SpeedCheck, check_speed
+
+
+def speed_models(model: FullCarSpectrum) -> Callable[[float], FullCarSpectrum]:
+    """``model`` as it is now (its vehicle and assumed sensors: a snapshot, later calibrations
+    do not reach it) with its speed scaled by a factor."""
+    settings = model.settings | {"vehicle": model.vehicle}
+    speed = np.asarray(model.speed_mps, dtype=float)
+    return lambda c: FullCarSpectrum(freq_hz=model.freq_hz, **(settings | {"speed_mps": speed * c}))
+
+
+def check_full_speed(models: Callable[[float], FullCarSpectrum], periodogram: np.ndarray, counts: np.ndarray,
+                     cfg: LikelihoodConfig, theta: np.ndarray, value: float) -> SpeedCheck:
+    """The speed's check at the uncalibrated fit's optimum ``theta`` (negative log likelihood
+    ``value``) of the grouped ``periodogram`` (``counts`` bins in each mean)."""
+    def objective(c: float) -> FullWhittle:
+        return FullWhittle(models(c), periodogram, counts)
+
+    def refit(c: float, at: np.ndarray) -> tuple[np.ndarray, float] | None:
+        res = scoring(objective(c), at, cfg.tol, cfg.max_iter)
+        return (res.x, float(res.fun)) if np.isfinite(res.fun) else None
+
+    return check_speed(lambda c, at: objective(c).fun(at), refit, theta, value)
