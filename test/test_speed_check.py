@@ -65,3 +65,16 @@ def test_the_full_car_names_km_per_hour_sent_as_m_per_s():
     note = next(n for n in est.notes if "speed topic reads" in n)
     assert float(note.split("reads ")[1].split("×")[0]) == pytest.approx(3.6, rel=0.01), note
     assert "km/h sent as m/s?" in note
+
+
+def test_trial_tells_the_estimator_a_wrong_speed(capsys):
+    """`rozyn trial --speed-error 0.1`: the simulated car drives at 100 km/h, the estimator is
+    told 110; the report carries the speed check's note."""
+    from rozyn_estimator.tools import cli
+
+    code = cli.main(["trial", "--seed", "11", "--amplitudes", "gaussian", "--noise-fraction", "0.1",
+                     "--duration-s", "120", "--speed-error", "0.1"])
+    printed = capsys.readouterr().out
+    assert code == 0 and "speed check: the speed topic reads 1.1× the speed the data show" in printed, printed
+    assert cli.main(["trial", "--speed-error", "-1"]) == 1  # a clear error, no traceback
+    assert "speed_error" in capsys.readouterr().err

@@ -91,3 +91,10 @@ def add_vehicle_error_options(p: argparse.ArgumentParser) -> None:
 def vehicle_error_values(args: argparse.Namespace) -> dict[str, Any]:
     """The ``TrialSpec`` ``*_error`` fields the options of :func:`add_vehicle_error_options` give."""
     return {field: getattr(args, field) for field, _ in VEHICLE_ERROR_OPTIONS.values()}
+
+
+def add_speed_error_option(p: argparse.ArgumentParser) -> None:
+    """``--speed-error SHARE``: a speed topic that reads wrong (``TrialSpec.speed_error``)."""
+    p.add_argument("--speed-error", type=float, default=0.0, metavar="SHARE",
+                   help="the estimator is told the speed times (1 + SHARE), as a wrong speed topic would "
+                        "tell it: 2.6 is km/h sent as m/s, 0.1 reads 10 %% high (default: 0)")

@@ -16,6 +16,7 @@ from rozyn_estimator.tools.compare.suites import SUITES, Case, suite
 from rozyn_estimator.tools.options import (
     add_departure_options,
     add_run_options,
+    add_speed_error_option,
     add_vehicle_error_options,
     departure_values,
     vehicle_error_values,
@@ -64,6 +65,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                          help="a built-in vehicle: table5-1 (default) or second (heavier, longer)")
     add_departure_options(p)
     add_vehicle_error_options(p)
+    add_speed_error_option(p)
     p.add_argument("--seeds", default="1-100", metavar="SPEC",
                    help="seeds: 1-100, or 1,5,9-12 (default: 1-100)")
     p.add_argument("--jobs", type=int, default=None, help="parallel processes (default: all cores)")
@@ -89,6 +91,7 @@ def base_spec(args: argparse.Namespace) -> TrialSpec:
         duration_s=args.duration_s, rate_hz=args.rate_hz, noise_fraction=args.noise,
         bias_mps2=tuple(args.bias_mps2), vehicle=vehicle, periodic=not args.endless_road,
         departures=Departures(**departure_values(args)), **vehicle_error_values(args),
+        speed_error=args.speed_error,
     )
 
 

@@ -18,6 +18,7 @@ from rozyn_estimator.tools.cars import CARS
 from rozyn_estimator.tools.options import (
     add_departure_options,
     add_run_options,
+    add_speed_error_option,
     add_vehicle_error_options,
     add_vehicle_option,
     departure_values,
@@ -53,6 +54,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_vehicle_option(p)
     add_departure_options(p)
     add_vehicle_error_options(p)
+    add_speed_error_option(p)
     p.add_argument("--durations-s", metavar="GRID",
                    help="a nested drive instead of --duration-s: one drive as long as the longest of these "
                         "measurement times (START:STOP:STEP and/or a comma list), estimated after each, "
@@ -79,7 +81,7 @@ def trial_spec(args: argparse.Namespace) -> TrialSpec:
         duration_s=args.duration_s, rate_hz=args.rate_hz, noise_std_mps2=noise_std(args),
         noise_fraction=args.noise_fraction, vehicle=car.vehicle(args.vehicle),
         method=args.method or "likelihood", departures=Departures(**departure_values(args)),
-        **vehicle_error_values(args),
+        **vehicle_error_values(args), speed_error=args.speed_error,
     )
 
 

@@ -71,10 +71,10 @@ def estimate_block(spec: TrialSpec, block: SimBlock, method: str | None = None, 
     """Run the car's estimator of ``method`` (default: the spec's) on a simulated block (its
     first ``n`` samples; default: all), warm-started from ``warm`` if given.
 
-    The estimator is told the speed per sample (as from a speed topic) and the spec's
-    estimator vehicle (which may carry value errors).
+    The estimator is told the speed per sample (as from a speed topic; times ``1 +
+    speed_error``) and the spec's estimator vehicle (which may carry value errors).
     """
-    accel, speed = block.accel_mps2, block.speed_mps
+    accel, speed = block.accel_mps2, block.speed_mps * (1.0 + spec.speed_error)
     if n is not None:
         accel, speed = accel[:n], speed[:n] if np.ndim(speed) else speed
     return spec.car.run_estimator(accel, spec.rate_hz, spec.estimator_vehicle, spec.pipeline_config(method),

@@ -60,6 +60,8 @@ class TrialSpec:
                                            length=2)
     speed_variation: float = param(0.0, "relative amplitude of a sinusoidal speed change")
     speed_period_s: float = param(60.0, "period of the speed change", unit="s")
+    speed_error: float = param(0.0, "the estimator is told the speed times (1 + this): a wrong speed topic",
+                               low=-1.0, open_low=True, high=100.0)
     periodic: bool = param(True, "road period = the record's distance (thesis eq 4-7); false: endless road")
     vehicle: AnyVehicle = field(default_factory=Vehicle)  # the true vehicle; its type picks the car
     departures: Departures = param(description="the simulated plant's and sensors' departures from the "
