@@ -294,8 +294,8 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     # a calibration's shares are checked with it: what they absorbed counts as fitted dof
     checked, at = (objective, theta) if posterior is None else (posterior.objective, posterior.point)
     fit = full_model_fit(checked, at, spectra, step, neighbour_correlation(spectra.window_dft))
-    if (fit is not None and not fit.ok) or (calibration is not None and calibration.departures()):
-        told = check_full_speed(uncalibrated[0], periodogram, counts, cfg, *uncalibrated[1:])
+    if (fit is not None and fit.misfit) or (calibration is not None and calibration.departures()):
+        told = check_full_speed(uncalibrated[0], periodogram, counts, cfg, *uncalibrated[1:], y.shape[0] / fs)
         if told.wrong:
             raise _FitError(told.text())
         notes += [f"speed check: {told.text()}"] if told.doubtful else []

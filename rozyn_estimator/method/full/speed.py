@@ -10,7 +10,7 @@ import numpy as np
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.full.whittle import FullWhittle, scoring
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
-from rozyn_estimator.method.likelihood.speedcheck import SpeedCheck, check_speed
+from rozyn_estimator.method.likelihood.speedcheck import MIN_WINDOW_S, SpeedCheck, check_speed
 
 
 def speed_models(model: FullCarSpectrum) -> Callable[[float], FullCarSpectrum]:
@@ -22,9 +22,12 @@ def speed_models(model: FullCarSpectrum) -> Callable[[float], FullCarSpectrum]:
 
 
 def check_full_speed(models: Callable[[float], FullCarSpectrum], periodogram: np.ndarray, counts: np.ndarray,
-                     cfg: LikelihoodConfig, theta: np.ndarray, value: float) -> SpeedCheck:
+                     cfg: LikelihoodConfig, theta: np.ndarray, value: float, window_s: float) -> SpeedCheck:
     """The speed's check at the uncalibrated fit's optimum ``theta`` (negative log likelihood
-    ``value``) of the grouped ``periodogram`` (``counts`` bins in each mean)."""
+    ``value``) of the grouped ``periodogram`` (``counts`` bins in each mean) of a ``window_s``
+    window (none below :data:`MIN_WINDOW_S`)."""
+    if window_s < MIN_WINDOW_S:
+        return SpeedCheck(1.0, 0.0)
     def objective(c: float) -> FullWhittle:
         return FullWhittle(models(c), periodogram, counts)
 

@@ -57,6 +57,11 @@ class ModelFit:
     def ok(self) -> bool:
         return self.verdict == FITS
 
+    @property
+    def misfit(self) -> bool:
+        """The check ran and the model does not fit (not: it could not be computed)."""
+        return self.verdict not in (FITS, NOT_COMPUTABLE)
+
     def to_dict(self) -> dict[str, object]:
         def number(x: float) -> float | None:  # JSON has no NaN (a check that cannot be computed)
             return x if math.isfinite(x) else None
