@@ -10,7 +10,7 @@ import numpy as np
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.full.whittle import FullWhittle, scoring
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
-from rozyn_estimator.method.likelihood.speedcheck import MIN_WINDOW_S, SpeedCheck, check_speed
+from rozyn_estimator.method.likelihood.speedcheck import SpeedCheck, check_speed
 
 
 def speed_models(model: FullCarSpectrum) -> Callable[[float], FullCarSpectrum]:
@@ -25,9 +25,7 @@ def check_full_speed(models: Callable[[float], FullCarSpectrum], periodogram: np
                      cfg: LikelihoodConfig, theta: np.ndarray, value: float, window_s: float) -> SpeedCheck:
     """The speed's check at the uncalibrated fit's optimum ``theta`` (negative log likelihood
     ``value``) of the grouped ``periodogram`` (``counts`` bins in each mean) of a ``window_s``
-    window (none below :data:`MIN_WINDOW_S`)."""
-    if window_s < MIN_WINDOW_S:
-        return SpeedCheck(1.0, 0.0)
+    window."""
     def objective(c: float) -> FullWhittle:
         return FullWhittle(models(c), periodogram, counts)
 
@@ -35,4 +33,4 @@ def check_full_speed(models: Callable[[float], FullCarSpectrum], periodogram: np
         res = scoring(objective(c), at, cfg.tol, cfg.max_iter)
         return (res.x, float(res.fun)) if np.isfinite(res.fun) else None
 
-    return check_speed(lambda c, at: objective(c).fun(at), refit, theta, value)
+    return check_speed(lambda c, at: objective(c).fun(at), refit, theta, value, window_s)

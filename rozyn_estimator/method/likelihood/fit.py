@@ -47,7 +47,7 @@ from rozyn_estimator.method.likelihood.newton import Fits, aground, noise_share
 from rozyn_estimator.method.likelihood.objective import WhittleObjective
 from rozyn_estimator.method.likelihood.score import SandwichRatio
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, fast_length, window_spectra
-from rozyn_estimator.method.likelihood.speedcheck import MIN_WINDOW_S, check_speed, half_car_speed
+from rozyn_estimator.method.likelihood.speedcheck import check_speed, half_car_speed
 from rozyn_estimator.method.likelihood.uncertainty.augment import plan
 from rozyn_estimator.method.likelihood.uncertainty.budget import uncertainty
 from rozyn_estimator.method.likelihood.uncertainty.calibration import Calibration
@@ -277,9 +277,9 @@ def _speed_notes(model: HalfCarSpectrum, spectra: Spectra, cfg: LikelihoodConfig
     or a value calibrated far beyond its tolerance (a speed's error bends the sensors' timing).
     A speed the data refute fails the refinement (:class:`_FitError`); a doubtful one is a note."""
     far = any(abs(c.estimate) > 3.0 * c.tolerance for c in calibration if c.tolerance > 0)
-    if not ((fit is not None and fit.misfit) or far) or spectra.n_samples < MIN_WINDOW_S * spectra.fs_hz:
+    if not ((fit is not None and fit.misfit) or far):
         return []
-    found = check_speed(*half_car_speed(model, spectra, cfg), theta, value)
+    found = check_speed(*half_car_speed(model, spectra, cfg), theta, value, spectra.n_samples / spectra.fs_hz)
     if found.wrong:
         raise _FitError(found.text())
     return [f"speed check: {found.text()}"] if found.doubtful else []

@@ -67,16 +67,19 @@ class SpeedCheck:
 
 def check_speed(value_at: Callable[[float, np.ndarray], float],
                 refit: Callable[[float, np.ndarray], tuple[np.ndarray, float] | None],
-                theta: np.ndarray, value: float, rounds: int = 12) -> SpeedCheck:
-    """The speed's check at the fit's optimum ``theta`` (its negative log likelihood ``value``):
-    ``value_at(c, θ)`` the negative log likelihood with the speed scaled by ``c`` (inf where
-    it has none), ``refit(c, θ)`` the fit from θ at that scale (its optimum and value).
+                theta: np.ndarray, value: float, window_s: float, rounds: int = 12) -> SpeedCheck:
+    """The speed's check at the fit's optimum ``theta`` (its negative log likelihood ``value``)
+    of a ``window_s`` window (none below :data:`MIN_WINDOW_S`): ``value_at(c, θ)`` the negative
+    log likelihood with the speed scaled by ``c`` (inf where it has none), ``refit(c, θ)`` the
+    fit from θ at that scale (its optimum and value).
 
     Each round scans the conditional likelihood over the scales at the current θ and refits
     at the best one: a fit bent by a wrong speed sees the true one's peak only roughly at
     first (km/h as m/s: 1.27× in the first round), so it scans again from the refit. A fit
     bent to a speed 10 % low prefers its own at fixed θ: where a scan sees nothing, refits at
     ±10 and ±20 % look (km/h as m/s stopped at 3.92× without them on 2 roads of 20)."""
+    if window_s < MIN_WINDOW_S:
+        return SpeedCheck(1.0, 0.0)
     scale, at, best_value = 1.0, theta, value
     for _ in range(rounds):
         with np.errstate(all="ignore"):
