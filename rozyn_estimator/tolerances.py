@@ -48,6 +48,10 @@ class Tolerances:
                                          low=0.0, high=1.0)
     sensor_rear_offset_m: float = param(0.01, "rear accelerometer position along the body", unit="m",
                                         low=0.0, high=1.0)
+    cog_height_m: float = param(0.03, "centre of gravity's height (applies where the vehicle gives its "
+                                "heights)", unit="m", low=0.0, high=1.0)
+    wheel_centre_height_m: float = param(0.005, "wheel centres' height (applies where the vehicle gives its "
+                                         "heights)", unit="m", low=0.0, high=1.0)
     sensor_gain_front: float = param(0.02, "front accelerometer scale factor, share", **_SHARE)
     sensor_gain_rear: float = param(0.02, "rear accelerometer scale factor, share", **_SHARE)
     sensor_time_offset_s: float = param(0.002, "time offset between the sensors (rear minus front)",
@@ -82,13 +86,17 @@ class Tolerances:
     def to_dict(self) -> dict[str, float]:
         return {f.name: float(getattr(self, f.name)) for f in dataclasses.fields(self)}
 
+    def applying(self, vehicle: Any) -> dict[str, float]:
+        """The non-zero tolerances that apply to ``vehicle`` (as given: shares or units): the
+        heights' only where it gives them (otherwise the geometry is not carried)."""
+        given = getattr(vehicle, "cog_height_m", 0.0) > 0
+        return {key: value for key, value in self.to_dict().items()
+                if value > 0 and (given or key not in HEIGHT_KEYS)}
+
     def absolute(self, vehicle: Any) -> dict[str, float]:
-        """The non-zero tolerances in the units of their values (N/m, kg, m, share, s)."""
-        out = {}
-        for key, value in self.to_dict().items():
-            if value > 0:
-                out[key] = value * abs(getattr(vehicle, key)) if key in RELATIVE_FIELDS else value
-        return out
+        """:meth:`applying`'s tolerances in the units of their values (N/m, kg, m, share, s)."""
+        return {key: value * abs(getattr(vehicle, key)) if key in RELATIVE_FIELDS else value
+                for key, value in self.applying(vehicle).items()}
 
     @property
     def any(self) -> bool:
@@ -99,6 +107,7 @@ class Tolerances:
 KEYS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(Tolerances))
 RELATIVE_FIELDS: tuple[str, ...] = tuple(k for k in KEYS if k.endswith(("_npm", "_nspm", "_kg")))
 """Vehicle fields whose tolerance is a share of the value (the rest are in metres or seconds)."""
+HEIGHT_KEYS = ("cog_height_m", "wheel_centre_height_m")
 SENSOR_KEYS = ("sensor_gain_front", "sensor_gain_rear", "sensor_time_offset_s")
 
 

@@ -64,6 +64,11 @@ class Vehicle:
     sensor_front_offset_m: float = param(0.0, "front accelerometer behind the front axle", unit="m")
     sensor_rear_offset_m: float = param(0.0, "rear accelerometer behind the rear axle (negative: ahead of "
                                         "it)", unit="m")
+    cog_height_m: float = param(0.0, "centre of gravity above the road (0, with wheel_centre_height_m 0: "
+                                "not given, and the weight's pitch moment through the geometry not carried; "
+                                "rozyn_estimator.gravity)", unit="m", low=0.0)
+    wheel_centre_height_m: float = param(0.0, "wheel centres above the road (the loaded tyres' radius; "
+                                         "0: not given)", unit="m", low=0.0)
     tolerances: Tolerances = param(description="standard uncertainties of the assumed values",
                                    default_factory=Tolerances)
 
@@ -91,7 +96,10 @@ class Vehicle:
         return out
 
 
+HEIGHTS_RULE = ("wheel_centre_height_m", lambda v: (v.cog_height_m > 0) == (v.wheel_centre_height_m > 0),
+                "give both heights (cog_height_m and wheel_centre_height_m, above the road) or neither")
 _RULES = (
+    HEIGHTS_RULE,
     ("cog_from_front_axle_m", lambda v: 0.0 < v.cog_from_front_axle_m < v.wheelbase_m,
      "must lie between the axles (0 < lf < wheelbase_m)"),
     ("sensor_rear_offset_m", lambda v: v.sensor_x_m[1] - v.sensor_x_m[0] >= 0.25 * v.wheelbase_m,

@@ -43,6 +43,7 @@ from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.parameters import Param, build, check, param, spec_of
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.vehicle import (
+    HEIGHTS_RULE,
     MAX_VEHICLE_FILE_BYTES,
     Vehicle,
     _listed,
@@ -131,6 +132,11 @@ class FullVehicle:
                              unit="m", length=4)
     sensor_y_m: Quad = param((0.75, -0.75, 0.75, -0.75), "accelerometers (FL, FR, RL, RR) left of the "
                              "centreline", unit="m", length=4)
+    cog_height_m: float = param(0.0, "centre of gravity above the road (0, with wheel_centre_height_m 0: "
+                                "not given, and the weight's pitch and roll moments through the geometry not "
+                                "carried; rozyn_estimator.gravity)", unit="m", low=0.0)
+    wheel_centre_height_m: float = param(0.0, "wheel centres above the road (the loaded tyres' radius; "
+                                         "0: not given)", unit="m", low=0.0)
     tolerances: FullTolerances = param(description="standard uncertainties of the assumed values",
                                        default_factory=FullTolerances)
 
@@ -184,6 +190,7 @@ def _spans(v: FullVehicle) -> tuple[float, float]:
 
 
 _RULES = (
+    HEIGHTS_RULE,
     ("cog_from_front_axle_m", lambda v: 0.0 < v.cog_from_front_axle_m < v.wheelbase_m,
      "must lie between the axles (0 < lf < wheelbase_m)"),
     ("cog_lateral_m", lambda v: abs(v.cog_lateral_m) < 0.5 * min(v.track_front_m, v.track_rear_m),
@@ -233,6 +240,7 @@ def centreline_half_car(v: FullVehicle) -> Vehicle:
         **_axle_fields("suspension_stiffness_{}_npm", axles(v.suspension_stiffness_npm)),
         **_axle_fields("suspension_damping_{}_nspm", axles(v.suspension_damping_nspm)),
         sensor_front_offset_m=(x[0] + x[1]) / 2, sensor_rear_offset_m=(x[2] + x[3]) / 2 - v.wheelbase_m,
+        cog_height_m=v.cog_height_m, wheel_centre_height_m=v.wheel_centre_height_m,
         tolerances=v.tolerances.half_car(),
     )
 

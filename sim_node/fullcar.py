@@ -19,7 +19,9 @@ stiffness ``K`` [N*m/rad] acts on the difference of its axle's two suspension ex
     K = diag(k_t, 0, 0, 0) + G^T diag(k_s) G + sum_axles (K_arb / t^2) G^T a a^T G  (eq 3-5)
     C = diag(c_t, 0, 0, 0) + G^T diag(c_s) G                         (eq 3-6)
 
-with ``a = [1, -1, 0, 0]`` (front) or ``[0, 0, 1, -1]`` (rear). The road under the four
+with ``a = [1, -1, 0, 0]`` (front) or ``[0, 0, 1, -1]`` (rear), and, where the vehicle gives
+its heights, the weight through the geometry on pitch and roll (:mod:`rozyn_estimator.gravity`:
+``-m g h`` on their stiffness, ``μ h²`` on their inertia). The road under the four
 tyres enters as displacement (``k_t``) and velocity (``c_t``), and the model is
 discretised exactly (first-order hold) and propagated in modal blocks by
 :mod:`sim_node.modal`, as the half car is.
@@ -35,6 +37,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from rozyn_estimator.gravity import gravity_height_m, rotation_inertia_kgm2, rotation_stiffness_nmprad
 from rozyn_estimator.vehicle_full import FullVehicle
 from sim_node.departures import SuspensionLaw
 from sim_node.modal import SecondOrderModel, StateSpace, natural_modes_of, state_space_of, static_state_of
@@ -88,6 +91,10 @@ def second_order_model(v: FullVehicle) -> SecondOrderModel:
     stiffness = corners(v.suspension_stiffness_npm, v.tyre_stiffness_npm, bars)
     damping = corners(v.suspension_damping_nspm, v.tyre_damping_nspm, np.zeros((N_TYRES, N_TYRES)))
     mass = np.diag([*v.unsprung_mass_kg, v.sprung_mass_kg, v.pitch_inertia_kgm2, v.roll_inertia_kgm2])
+    h = gravity_height_m(v)  # the weight through the geometry, in pitch and in roll alike
+    for k in (PITCH, ROLL):
+        stiffness[k, k] += rotation_stiffness_nmprad(v.sprung_mass_kg, h)
+        mass[k, k] += rotation_inertia_kgm2(v.sprung_mass_kg, h, sum(v.unsprung_mass_kg))[0]
     tyre_k = np.zeros((N_DOF, N_TYRES))
     tyre_k[:N_TYRES] = np.diag(v.tyre_stiffness_npm)
     tyre_c = np.zeros((N_DOF, N_TYRES))

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rozyn_estimator.gravity import gravity_height_m, rotation_inertia_kgm2, rotation_stiffness_nmprad
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.departures import SuspensionLaw
 from sim_node.modal import SecondOrderModel, StateSpace, natural_modes_of, state_space_of, static_state_of
@@ -28,7 +29,8 @@ N_STATE = 2 * N_DOF
 
 
 def second_order_model(v: Vehicle) -> SecondOrderModel:
-    """Mass, damping and stiffness matrices of eqs 3-4 to 3-7 (typos corrected)."""
+    """Mass, damping and stiffness matrices of eqs 3-4 to 3-7 (typos corrected), with the weight
+    through the geometry on pitch where the vehicle gives its heights (:mod:`rozyn_estimator.gravity`)."""
     lf, lr = v.cog_from_front_axle_m, v.cog_from_rear_axle_m
 
     def suspension_matrix(kf: float, kr: float, tf: float, tr: float) -> np.ndarray:
@@ -58,6 +60,10 @@ def second_order_model(v: Vehicle) -> SecondOrderModel:
     mass = np.diag(
         [v.unsprung_mass_front_kg, v.unsprung_mass_rear_kg, v.sprung_mass_kg, v.pitch_inertia_kgm2]
     )
+    h = gravity_height_m(v)  # the weight through the geometry (0 where the heights are not given)
+    stiffness[3, 3] += rotation_stiffness_nmprad(v.sprung_mass_kg, h)
+    unsprung_kg = v.unsprung_mass_front_kg + v.unsprung_mass_rear_kg
+    mass[3, 3] += rotation_inertia_kgm2(v.sprung_mass_kg, h, unsprung_kg)[0]
     tyre_k = np.zeros((N_DOF, 2))
     tyre_k[0, 0], tyre_k[1, 1] = v.tyre_stiffness_front_npm, v.tyre_stiffness_rear_npm
     tyre_c = np.zeros((N_DOF, 2))

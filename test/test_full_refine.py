@@ -26,6 +26,7 @@ ASYMMETRIC = FullVehicle(
     sensor_x_m=(0.2, 0.1, 2.6, 2.7), sensor_y_m=(0.6, -0.5, 0.7, -0.65),
 )
 EXACT = dataclasses.replace(FullVehicle(), tolerances=FullTolerances.none())
+RAISED = ASYMMETRIC.replace(cog_height_m=0.55, wheel_centre_height_m=0.3)  # gravity through the geometry
 SPEED_MPS = 100 / 3.6
 
 
@@ -44,21 +45,22 @@ def test_the_model_is_the_simulators_transfer_function():
     """G = iω P D⁻¹ Bᵀ T per unit road velocity equals the plant's state space (road height
     in, accelerations out) divided by iω, with every coupling at work."""
     f = np.linspace(0.3, 20.0, 40)
-    model = FullCarSpectrum(ASYMMETRIC, (0, 1, 2, 3), f, 100.0, 20.0, aliases=0)
-    ss = state_space(ASYMMETRIC)
+    model = FullCarSpectrum(RAISED, (0, 1, 2, 3), f, 100.0, 20.0, aliases=0)
+    ss = state_space(RAISED)
     w = 2 * np.pi * f
     eye = np.eye(ss.a.shape[0])
     plant = np.array([ss.c @ np.linalg.solve(1j * wi * eye - ss.a, ss.b) + ss.d for wi in w])
-    M, _ = model._mass_matrix(model.theta(_truth(ASYMMETRIC), 1.0, np.ones(4)))
-    D = model.body_stiffness - (w**2)[:, None, None] * M
+    theta = model.theta(_truth(RAISED), 1.0, np.ones(4))
+    M, _ = model._mass_matrix(theta)
+    D = model.body_stiffness + model.gravity_stiffness(theta) - (w**2)[:, None, None] * M
     G = model.sensing @ np.linalg.solve(D, model.body_input)
     assert np.max(np.abs(G * (1j * w)[:, None, None] - plant)) < 1e-9 * np.max(np.abs(plant))
 
 
 def test_the_derivatives_are_the_models_slopes():
-    model = FullCarSpectrum(ASYMMETRIC, (0, 1, 3), np.linspace(0.5, 15.0, 60), 100.0,
+    model = FullCarSpectrum(RAISED, (0, 1, 3), np.linspace(0.5, 15.0, 60), 100.0,
                             np.linspace(15.0, 25.0, 500), aliases=1)
-    theta = model.theta(_truth(ASYMMETRIC), 1e-4, np.full(3, 1e-3))
+    theta = model.theta(_truth(RAISED), 1e-4, np.full(3, 1e-3))
     theta[6:10] = [2.2, 0.1, -0.2, 0.3]  # waviness, road shape, coherence scale
     _, dS = model.spectrum(theta)
     assert dS is not None

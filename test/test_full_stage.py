@@ -67,6 +67,9 @@ def test_free_decay_gives_all_five_parameters(columns):
     assert np.abs(_error(exact, ASYMMETRIC)) == pytest.approx(np.zeros(5), abs=2e-4)
     err = _error(fit_full_inertia(ASYMMETRIC, body, columns, "eq2-22"), ASYMMETRIC)
     assert np.all(np.abs(err[:4]) < 0.01) and abs(err[4]) < 0.005
+    raised = ASYMMETRIC.replace(cog_height_m=0.55, wheel_centre_height_m=0.3)  # gravity through the geometry
+    exact = fit_full_inertia(raised, _free_decay_modes(raised, columns), columns, "condensed")
+    assert np.abs(_error(exact, raised)) == pytest.approx(np.zeros(5), abs=2e-4)
     table = FullVehicle(cog_lateral_m=0.05)
     err = _error(fit_full_inertia(table, _free_decay_modes(table, columns), columns, "eq2-22"), table)
     assert np.all(np.abs(err[:4]) < 0.005) and abs(err[4]) < 0.005

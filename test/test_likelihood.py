@@ -49,10 +49,12 @@ def road_velocity_psd(speed_mps: float) -> float:
     return 2.0 * math.pi**2 * iso_gd_n0_m3("A") * REFERENCE_CPM**2 * speed_mps
 
 
-@pytest.mark.parametrize("offsets", [(0.0, 0.0), (0.4, -0.5)])
-def test_spectrum_matches_the_plant_state_space(offsets):
-    """The condensed frequency-domain model equals the plant's 8-state model exactly."""
-    v = Vehicle(sensor_front_offset_m=offsets[0], sensor_rear_offset_m=offsets[1])
+@pytest.mark.parametrize(("offsets", "heights"), [((0.0, 0.0), (0.0, 0.0)), ((0.4, -0.5), (0.55, 0.3))])
+def test_spectrum_matches_the_plant_state_space(offsets, heights):
+    """The condensed frequency-domain model equals the plant's 8-state model exactly (gravity
+    through the geometry included)."""
+    v = Vehicle(sensor_front_offset_m=offsets[0], sensor_rear_offset_m=offsets[1], cog_height_m=heights[0],
+                wheel_centre_height_m=heights[1])
     f = np.linspace(0.3, 20.0, 300)
     model = HalfCarSpectrum(v, f, 100.0, SPEED, aliases=0)
     S, _ = model.spectrum(model.theta(TRUTH, 1.0, np.array([1e-30, 1e-30])), derivatives=False)
@@ -435,7 +437,8 @@ def test_every_derivative_of_the_model_matches_finite_differences():
     from rozyn_estimator.method.likelihood.model import CORNER_TERMS
 
     freq = np.linspace(0.5, 15.0, 300)
-    model = HalfCarSpectrum(Vehicle(sensor_front_offset_m=0.2), freq, 100.0, np.full(500, 25.0) +
+    vehicle = Vehicle(sensor_front_offset_m=0.2, cog_height_m=0.55, wheel_centre_height_m=0.3)  # gravity too
+    model = HalfCarSpectrum(vehicle, freq, 100.0, np.full(500, 25.0) +
                             np.linspace(0, 2, 500), aliases=1, estimate_waviness=True, road_shape_terms=2,
                             window_weights=np.array([0.25, 0.5, 0.25]), corner_terms=CORNER_TERMS,
                             sensor_positions=True, calibrate_gain=True, calibrate_time_offset=True)

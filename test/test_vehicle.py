@@ -89,7 +89,8 @@ def test_tolerances_defaults_file_mapping_and_parameters(tmp_path):
                                          ("tyre_stiffness", "npm"), ("tyre_damping", "nspm"))
           for axle in ("front", "rear")),
         "unsprung_mass_front_kg", "unsprung_mass_rear_kg", "wheelbase_m", "sensor_front_offset_m",
-        "sensor_rear_offset_m", "sensor_gain_front", "sensor_gain_rear", "sensor_time_offset_s"}
+        "sensor_rear_offset_m", "sensor_gain_front", "sensor_gain_rear", "sensor_time_offset_s",
+        "cog_height_m", "wheel_centre_height_m"}
     path = tmp_path / "car.yaml"
     path.write_text("wheelbase_m: 2.9\ntolerances: {tyre_stiffness_front_npm: 0.1}\n")
     listed = load_vehicle(path).tolerances

@@ -37,7 +37,7 @@ GROUPS = {
     "tyre_stiffness": "tyre stiffness", "tyre_damping": "tyre damping", "unsprung_mass": "unsprung masses",
     "wheelbase": "wheelbase", "sensor_front_offset": "sensor positions",
     "sensor_rear_offset": "sensor positions", "sensor_gain": "sensor gains",
-    "sensor_time_offset": "sensor timing",
+    "sensor_time_offset": "sensor timing", "cog_height": "heights", "wheel_centre_height": "heights",
 }
 UNITS = ("kg", "kg m2", "m")
 _REL_STEP = 1e-5

@@ -26,10 +26,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from rozyn_estimator.gravity import gravity_height_m, rotation_inertia_kgm2, rotation_stiffness_nmprad
 from rozyn_estimator.method.identification import IdentificationError, Mode
 from rozyn_estimator.vehicle import Vehicle
 
 STIFFNESS_MODELS = ("eq2-21", "eq2-22", "condensed")
+_PASSES = 10  # the weight's stiffness is ~1 % of the pitch stiffness: each pass gains ~2 digits
 FIT_KINDS = ("modal", "stiffness-block")
 
 
@@ -92,13 +94,31 @@ def fit_inertia(
             frequency-dependent stiffness is well defined; as A0 has the modes as its
             eigenvectors (eq 2-20), ``A0 v_j = s_j v_j`` is the measured side.
             ``stiffness-block`` compares the stiffness block of A0 entry by entry (the
-            thesis' fit, with eq 2-21).
+            thesis' fit, with eq 2-21). Where the vehicle gives its heights, ``modal``
+            carries the weight through the geometry (:mod:`rozyn_estimator.gravity`): its
+            stiffness for the last pass' mass (it is ~1 % of the pitch stiffness: a few
+            passes), its inertia taken off the fitted one.
 
     Raises:
         IdentificationError: the fit lands outside the physical range.
     """
     if kind not in FIT_KINDS:
         raise ValueError(f"unknown fit kind {kind!r}; choose from {', '.join(FIT_KINDS)}")
+    h = gravity_height_m(v)
+    params = _fit_once(v, modes, model, kind, 0.0)
+    for _ in range(_PASSES if h and kind == "modal" else 0):  # the weight's stiffness: m from the last pass
+        last, params = params, _fit_once(v, modes, model, kind, rotation_stiffness_nmprad(params[0], h))
+        if abs(params[0] - last[0]) < 1e-12 * params[0]:
+            break
+    if h and kind == "modal":  # the fit sees the inertia the body swings with: I + μ h²
+        unsprung_kg = v.unsprung_mass_front_kg + v.unsprung_mass_rear_kg
+        params[1] -= rotation_inertia_kgm2(params[0], h, unsprung_kg)[0]
+    return params
+
+
+def _fit_once(v: Vehicle, modes: Sequence[Mode], model: str, kind: str, gravity_nmprad: float) -> np.ndarray:
+    """One linear fit (:func:`fit_inertia`) with the weight's pitch stiffness through the
+    geometry ``gravity_nmprad`` (-m g h for the m of the last pass) known."""
     L = v.wheelbase_m
     poles = np.array([md.eigenvalue for md in modes])
     shapes = axle_shapes(v, modes)
@@ -112,7 +132,7 @@ def fit_inertia(
             zf, zr = corner_impedances(v, s, model)
             psi = shapes[:, j]
             total = zf * psi[0] + zr * psi[1]  # vertical force per unit amplitude
-            rear = zr * psi[1]
+            rear = zr * psi[1] - gravity_nmprad * (psi[0] - psi[1]) / L**2  # with K_g = -m g h on the pitch
             # -M^-1 Z psi = s^2 psi (lower rows of A0 v = s v), linear in (a, p, w)
             rows += [[total, -L * rear, 0.0], [total, -L * (total + rear), L * L * rear]]
             target_parts += list(-(s * s) * psi)

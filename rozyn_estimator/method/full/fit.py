@@ -28,7 +28,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from rozyn_estimator.method.fit import STIFFNESS_MODELS
+from rozyn_estimator.gravity import gravity_height_m, rotation_inertia_kgm2, rotation_stiffness_nmprad
+from rozyn_estimator.method.fit import _PASSES, STIFFNESS_MODELS
 from rozyn_estimator.method.identification import IdentificationError, Mode
 from rozyn_estimator.vehicle_full import FullVehicle
 
@@ -200,18 +201,40 @@ def fit_full_inertia(v: FullVehicle, modes: Sequence[Mode], sensors: Sequence[in
     """Least-squares ``(m [kg], I_xx [kg m²], I_yy [kg m²], l_f [m], y_c [m])`` from the three
     identified body modes (heave, pitch and roll, in any order).
 
+    Where the vehicle gives its heights, the fit carries the weight through the geometry
+    (:mod:`rozyn_estimator.gravity`) as the half car's does: ``-m g h`` on pitch and roll for the
+    last pass' mass, ``μ h²`` taken off both fitted inertias.
+
     Raises:
         IdentificationError: the fit lands outside the physical range.
     """
+    h = gravity_height_m(v)
+    params = _fit_full_once(v, modes, sensors, model, 0.0)
+    for _ in range(_PASSES if h else 0):  # the weight's stiffness: m from the last pass
+        gravity = rotation_stiffness_nmprad(params[0], h)
+        last, params = params, _fit_full_once(v, modes, sensors, model, gravity)
+        if abs(params[0] - last[0]) < 1e-12 * params[0]:
+            break
+    if h:
+        params[1:3] -= rotation_inertia_kgm2(params[0], h, sum(v.unsprung_mass_kg))[0]
+    return params
+
+
+def _fit_full_once(v: FullVehicle, modes: Sequence[Mode], sensors: Sequence[int], model: str,
+                   gravity_nmprad: float) -> np.ndarray:
+    """One linear fit (:func:`fit_full_inertia`) with the weight's stiffness ``gravity_nmprad``
+    on pitch and roll known."""
     x = np.asarray(v.corner_x_m)
     y = np.asarray(v.corner_y_m)
     shapes = corner_shapes(v, modes, sensors)
+    body = np.linalg.pinv(np.column_stack([np.ones(4), -x, y]))  # corners -> (z₀, φ, θ)
     rows, target = [], []
     for j, md in enumerate(modes):
         s = md.eigenvalue
         zc = shapes[:, j]
         f = corner_stiffness(v, s, model) @ zc  # the corners' forces on the body, per unit amplitude
-        total, fx, fy = f.sum(), x @ f, y @ f
+        _, phi, theta = body @ zc  # the generalised forces (Σf, -x·f, y·f) gain K_g on the rotations
+        total, fx, fy = f.sum(), x @ f - gravity_nmprad * phi, y @ f + gravity_nmprad * theta
         # -(G f)_i = s² z_i, linear in u (module docstring)
         rows.append(np.column_stack([np.full(4, total), -(x * total + fx), x * fx, -(y * total + fy),
                                      y * fy]))

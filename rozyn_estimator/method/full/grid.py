@@ -3,7 +3,7 @@ likelihood compares with the periodogram: :func:`evaluation_map`.
 
 The likelihood compares each (mean) periodogram ordinate with its expectation, S smoothed by
 the taper's spectral window and the group's spread of bins: ``S + m₂ S''/2``
-(:func:`averaging_matrix`; :func:`rozyn_estimator.method.full.spectrum.expected_periodogram_m2`).
+(:func:`averaging_matrix`; :func:`expected_periodogram_m2`).
 
 Why a coarse grid. The model's cost is per frequency (and per aliasing term), and S is
 smooth on the scale of the band's bins (a body resonance spans ~60 bins of a 120 s window,
@@ -99,3 +99,12 @@ def averaging_matrix(freq_hz: np.ndarray, m2_hz2: np.ndarray) -> sparse.csr_arra
     below, middle, above = _weights(freq_hz, m2_hz2)
     k = freq_hz.size
     return sparse.csr_array(sparse.diags_array([below, middle, above], offsets=[0, 1, 2], shape=(k, k + 2)))
+
+
+def expected_periodogram_m2(taper: np.ndarray, fs_hz: float) -> float:
+    """The second moment [Hz²] of a taper's spectral window: a tapered periodogram's ordinate
+    expects ``∫ W(ν) S(f - ν) dν ≈ S(f) + m₂ S''(f) / 2`` (W symmetric, unit mass), and
+    ``m₂ = Σ (Δw)² / (4π² Σ w²)`` in cycles per sample² (the window's rate of change; the
+    taper reaches zero at its ends). Tukey 0.2: 0.71 bin²."""
+    w = np.asarray(taper, dtype=float)
+    return float(np.sum(np.diff(np.r_[0.0, w, 0.0]) ** 2) / np.sum(w * w) / (4.0 * np.pi**2) * fs_hz**2)

@@ -9,7 +9,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum, expected_periodogram_m2
+from rozyn_estimator.method.full.grid import expected_periodogram_m2
+from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.full.whittle import FullWhittle, scoring
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.spectra import Spectra, taper_window

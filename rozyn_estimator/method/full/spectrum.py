@@ -42,26 +42,18 @@ import numpy as np
 from numpy.polynomial import legendre
 from scipy import sparse, special
 
+from rozyn_estimator.gravity import gravity_height_m, rotation_inertia_kgm2, rotation_stiffness_nmprad
 from rozyn_estimator.method.full.fit import corner_matrices, corner_response_derivatives
 from rozyn_estimator.method.full.grid import ALIAS_SPACING_HZ, alias_map, apply, evaluation_map
 from rozyn_estimator.method.full.uncertainty import sensing as sensor_model
-from rozyn_estimator.method.likelihood.road_input import delay_characteristic, spatial_band
+from rozyn_estimator.method.likelihood.road_input import delay_characteristic, spatial_band, track_coherence
 from rozyn_estimator.vehicle_full import FullVehicle
 
 _CORNER_FIELDS = ("wheelbase_m", "track_front_m", "track_rear_m", "unsprung_mass_kg", "tyre_stiffness_npm",
                   "tyre_damping_nspm", "suspension_stiffness_npm", "suspension_damping_nspm",
-                  "anti_roll_stiffness_front_nmprad", "anti_roll_stiffness_rear_nmprad")
+                  "anti_roll_stiffness_front_nmprad", "anti_roll_stiffness_rear_nmprad", "cog_height_m",
+                  "wheel_centre_height_m")
 BODY_NAMES = ("ln_mass", "ln_roll_inertia", "ln_pitch_inertia", "logit_cog", "cog_lateral_m")
-
-
-def track_coherence(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(γ, dγ/dc) of the isotropic surface for ``w = 2`` at ``x = 2π n B e^c``:
-    ``γ = x K₁(x)`` and, as ``d(x K₁)/dx = -x K₀``, ``dγ/dc = -x² K₀(x)``."""
-    xp = np.maximum(x, 1e-300)
-    with np.errstate(over="ignore", invalid="ignore"):
-        gamma = np.where(x > 0, np.nan_to_num(xp * special.k1(xp), nan=0.0), 1.0)
-        slope = np.where(x > 0, np.nan_to_num(-xp * xp * special.k0(xp), nan=0.0), 0.0)
-    return np.clip(gamma, 0.0, 1.0), slope
 
 
 class FullCarSpectrum:
@@ -190,6 +182,8 @@ class FullCarSpectrum:
             B = self.body_map = np.column_stack([np.ones(4), -np.array(v.corner_x_m), np.array(v.corner_y_m)])
             self.body_stiffness = B.T @ Z @ B  # Bᵀ Z B
             self.body_input = B.T @ T  # Bᵀ T
+            self.gravity_height_m = gravity_height_m(v)
+            self.unsprung_total_kg = float(sum(v.unsprung_mass_kg))
             phi = delay_characteristic(w, v.wheelbase_m, self.speed_mps)
             mean_speed = float(np.mean(self.speed_mps))
             self.x_coherence = 2.0 * np.pi * np.abs(w / (2.0 * np.pi)) / mean_speed * v.track_front_m
@@ -254,16 +248,25 @@ class FullCarSpectrum:
         return jac
 
     def _mass_matrix(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """M (3, 3) and dM/dθ for the five body parameters (5, 3, 3)."""
+        """M (3, 3) and dM/dθ for the five body parameters (5, 3, 3); the wheels' swing
+        through the geometry (``μ h²``, :mod:`rozyn_estimator.gravity`) adds to both rotations'."""
         m, ixx, iyy, lf, yc = self.physical(theta)
         t = np.array([1.0, -lf, yc])
         tt = np.outer(t, t)
-        M = m * tt + np.diag([0.0, iyy, ixx])
+        swing, d_swing = rotation_inertia_kgm2(m, self.gravity_height_m, self.unsprung_total_kg)
+        M = m * tt + np.diag([0.0, iyy + swing, ixx + swing])
         d_lf, d_yc = np.outer([0.0, -1.0, 0.0], t), np.outer([0.0, 0.0, 1.0], t)
         p = lf / self.wheelbase_m
-        dM = np.array([m * tt, np.diag([0.0, 0.0, ixx]), np.diag([0.0, iyy, 0.0]),
-                       m * (d_lf + d_lf.T) * self.wheelbase_m * p * (1 - p), m * (d_yc + d_yc.T)])
+        dM = np.array([m * tt + np.diag([0.0, d_swing, d_swing]), np.diag([0.0, 0.0, ixx]),
+                       np.diag([0.0, iyy, 0.0]), m * (d_lf + d_lf.T) * self.wheelbase_m * p * (1 - p),
+                       m * (d_yc + d_yc.T)])
         return M, dM
+
+    def gravity_stiffness(self, theta: np.ndarray) -> np.ndarray:
+        """The weight's stiffness through the geometry (3, 3): ``-m g h`` on pitch and roll; linear
+        in m, so also its derivative by ln m."""
+        k = rotation_stiffness_nmprad(math.exp(theta[0]), self.gravity_height_m)
+        return np.diag([0.0, k, k])
 
     # --- the model ----------------------------------------------------------------------
     def spectrum(self, theta: np.ndarray, derivatives: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
@@ -312,6 +315,8 @@ class FullCarSpectrum:
         _, dM = self._mass_matrix(theta)
         Q = (self.omega**2)[:, None, None] * (sensing @ inv_d)
         part = (Q[None] @ dM[:, None]) @ (motion @ herm(sensing))  # (p, F, k, k); matmul: einsum is 4x slower
+        if self.gravity_height_m != 0.0:  # ∂D/∂ln m also holds the weight's stiffness: ∂H = -D⁻¹ K_g H
+            part[0] -= (sensing @ inv_d) @ self.gravity_stiffness(theta) @ (motion @ herm(sensing))
         # the body's, the road shape's and the coherence's derivatives folded in one pass (one
         # sparse product: the same sums as one each, a fraction of the calls)
         shape = self.shape_basis.shape[0]
@@ -368,7 +373,8 @@ class FullCarSpectrum:
         if key == self._body_key and self._body_value is not None:
             return self._body_value
         M, _ = self._mass_matrix(theta)
-        inv_d = np.linalg.inv(self.body_stiffness - (self.omega**2)[:, None, None] * M)
+        inv_d = np.linalg.inv(self.body_stiffness + self.gravity_stiffness(theta)
+                              - (self.omega**2)[:, None, None] * M)
         H = inv_d @ self.body_input
         gamma, d_gamma = track_coherence(self.x_coherence * math.exp(theta[self.index["ln_coherence_scale"]]))
         weight = self.road_weight(theta)[:, None, None]
@@ -409,12 +415,3 @@ class FullCarSpectrum:
 def herm(m: np.ndarray) -> np.ndarray:
     """The conjugate transpose of stacked matrices."""
     return m.conj().swapaxes(-1, -2)
-
-
-def expected_periodogram_m2(taper: np.ndarray, fs_hz: float) -> float:
-    """The second moment [Hz²] of a taper's spectral window: a tapered periodogram's ordinate
-    expects ``∫ W(ν) S(f - ν) dν ≈ S(f) + m₂ S''(f) / 2`` (W symmetric, unit mass), and
-    ``m₂ = Σ (Δw)² / (4π² Σ w²)`` in cycles per sample² (the window's rate of change; the
-    taper reaches zero at its ends). Tukey 0.2: 0.71 bin²."""
-    w = np.asarray(taper, dtype=float)
-    return float(np.sum(np.diff(np.r_[0.0, w, 0.0]) ** 2) / np.sum(w * w) / (4.0 * np.pi**2) * fs_hz**2)

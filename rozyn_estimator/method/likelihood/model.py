@@ -43,6 +43,7 @@ from typing import Any, Literal, overload
 import numpy as np
 from scipy import special
 
+from rozyn_estimator.gravity import gravity_height_m, rotation_inertia_kgm2, rotation_stiffness_nmprad
 from rozyn_estimator.method.likelihood.corners import CORNERS, CornerState, corner_outer, sensor_dg
 from rozyn_estimator.method.likelihood.grid import (
     Reduction,
@@ -175,6 +176,8 @@ class HalfCarSpectrum:
         self.kt0 = np.array([v.tyre_stiffness_front_npm, v.tyre_stiffness_rear_npm])
         self.ct0 = np.array([v.tyre_damping_front_nspm, v.tyre_damping_rear_nspm])
         self.mt0 = np.array([v.unsprung_mass_front_kg, v.unsprung_mass_rear_kg])
+        self.gravity_height_m = gravity_height_m(v)
+        self.unsprung_total_kg = float(self.mt0.sum())
         self.z_tyre = self.kt0 + 1j * w[:, None] * self.ct0  # (A k, 2)
         self.w_tyre = self.z_tyre - (w * w)[:, None] * self.mt0  # tyre minus wheel inertia
         ideal = rear_gain == 1.0 and time_offset_s == 0.0
@@ -209,8 +212,11 @@ class HalfCarSpectrum:
         jac[0, 0], jac[1, 1], jac[2, 2] = m, inertia, self.wheelbase_m * p * (1.0 - p)
         return jac
 
-    def _mass_matrix(self, theta: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
-        """M_ax (2, 2) and its derivatives by (ln m, ln I, logit lf/L)."""
+    def _mass_matrix(self, theta: np.ndarray) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
+        """M_ax (2, 2), its derivatives by (ln m, ln I, logit lf/L), and the weight's pitch
+        stiffness through the geometry in the axle coordinates (``-m g h`` on the pitch
+        ``(x_sf - x_sr)/L``, :mod:`rozyn_estimator.gravity`: also its derivative by ln m); its
+        inertia ``μ h²`` adds to I."""
         m, inertia, lf = self.physical(theta)
         L = self.wheelbase_m
         lr = L - lf
@@ -218,7 +224,10 @@ class HalfCarSpectrum:
         pitch = np.array([[1.0, -1.0], [-1.0, 1.0]]) / L**2
         d_lf = np.array([[-2.0 * lr, lr - lf], [lr - lf, 2.0 * lf]]) / L**2
         p = lf / L
-        return m * heave + inertia * pitch, [m * heave, inertia * pitch, m * d_lf * L * p * (1.0 - p)]
+        swing, d_swing = rotation_inertia_kgm2(m, self.gravity_height_m, self.unsprung_total_kg)
+        mass = m * heave + (inertia + swing) * pitch
+        d_mass = [m * heave + d_swing * pitch, inertia * pitch, m * d_lf * L * p * (1.0 - p)]
+        return mass, d_mass, rotation_stiffness_nmprad(m, self.gravity_height_m) * pitch
 
     # --- the model ----------------------------------------------------------------------
     @overload
@@ -278,10 +287,10 @@ class HalfCarSpectrum:
         den = zs + wt
         Z = zs * wt / den  # condensed corner stiffness
         T = zs * zt / den  # road height -> force on the body
-        mass, d_mass = self._mass_matrix(theta)
-        d11 = Z[:, 0] - w2 * mass[0, 0]  # D = diag(Z) - ω² M_ax (complex symmetric)
-        d22 = Z[:, 1] - w2 * mass[1, 1]
-        d12 = -w2 * mass[0, 1]
+        mass, d_mass, geo = self._mass_matrix(theta)
+        d11 = Z[:, 0] + geo[0, 0] - w2 * mass[0, 0]  # D = diag(Z) + K_g - ω² M_ax (complex symmetric)
+        d22 = Z[:, 1] + geo[1, 1] - w2 * mass[1, 1]
+        d12 = geo[0, 1] - w2 * mass[0, 1]
         det = d11 * d22 - d12 * d12
         H = np.array([[d22, -d12], [-d12, d11]]) / det  # (2, 2, F)
         P = self.sensor_map
@@ -317,9 +326,11 @@ class HalfCarSpectrum:
             return S, None
         want = set(self.names if rows is None else rows)
         road: dict[str, np.ndarray] = {}  # ∂(rank part) on the extended grid, in θ's order
-        for j, name in enumerate(self.names[:3]):  # ∂D = -ω² dM: ∂g = ω² Q dM x
+        for j, name in enumerate(self.names[:3]):  # ∂D = ∂K_g - ω² dM: ∂g = Q (ω² dM - ∂K_g) x
             if name in want:
                 dg = [w2 * np.einsum("abf,bf->af", Q, d_mass[j] @ xc) for xc in x]
+                if j == 0 and self.gravity_height_m != 0.0:  # K_g is linear in m
+                    dg = [d - np.einsum("abf,bf->af", Q, geo @ xc) for d, xc in zip(dg, x, strict=True)]
                 road[name] = self._hermitian_part(self._outer_sum(dg, g, weight))
         if self.estimate_waviness and "waviness" in want:
             road["waviness"] = self._fold(gg, -weight * self.log_shape)

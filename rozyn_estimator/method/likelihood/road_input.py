@@ -1,10 +1,11 @@
 """How one road reaches both axles: :func:`delay_characteristic`, the rear wheel's delay
 behind the front over a window's speed profile; and how far it reaches in frequency:
-:func:`spatial_band`."""
+:func:`spatial_band`; and how alike the left and right tracks are: :func:`track_coherence`."""
 
 from __future__ import annotations
 
 import numpy as np
+from scipy import special
 
 
 def delay_characteristic(
@@ -63,3 +64,13 @@ def spatial_band(freq_hz: np.ndarray, speed_mps: float | np.ndarray, max_cpm: fl
     end_hz = max_cpm * float(np.mean(speed_mps))
     x = np.clip((f - (1.0 - _ROLL_OFF) * end_hz) / (2.0 * _ROLL_OFF * end_hz), 0.0, 1.0)
     return 0.5 * (1.0 + np.cos(np.pi * x))
+
+
+def track_coherence(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(γ, dγ/dc) of the isotropic surface for ``w = 2`` at ``x = 2π n B e^c``:
+    ``γ = x K₁(x)`` and, as ``d(x K₁)/dx = -x K₀``, ``dγ/dc = -x² K₀(x)``."""
+    xp = np.maximum(x, 1e-300)
+    with np.errstate(over="ignore", invalid="ignore"):
+        gamma = np.where(x > 0, np.nan_to_num(xp * special.k1(xp), nan=0.0), 1.0)
+        slope = np.where(x > 0, np.nan_to_num(-xp * xp * special.k0(xp), nan=0.0), 0.0)
+    return np.clip(gamma, 0.0, 1.0), slope

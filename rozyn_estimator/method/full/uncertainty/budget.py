@@ -20,6 +20,7 @@ import numpy as np
 from rozyn_estimator.method.budget import GROUPS, Budget
 from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES, fit_full_inertia
 from rozyn_estimator.method.identification import IdentificationError, Mode
+from rozyn_estimator.tolerances import HEIGHT_KEYS
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
 
 _REL_STEP = 1e-5  # share of a value
@@ -46,9 +47,7 @@ def full_contributions(v: FullVehicle, modes: Sequence[Mode], sensors: Sequence[
                        model: str) -> dict[str, np.ndarray]:
     """Contributions ``c_j`` (5,) of each toleranced value of ``v`` to the fit's estimate."""
     out = {}
-    for key, tol in v.tolerances.to_dict().items():
-        if tol <= 0:
-            continue
+    for key, tol in v.tolerances.applying(v).items():
         for name, step, move in _moves(v, key, sensors):
             try:
                 vehicle, sensed = move(step)
@@ -98,7 +97,7 @@ def vehicle_moves(v: FullVehicle, key: str,
     if key.startswith("anti_roll"):
         bar = getattr(v, key)
         return [] if bar == 0 else [(key, _REL_STEP, lambda h: moved_copy(v, **{key: bar * (1 + h)}))]
-    if key in ("wheelbase_m", "track_front_m", "track_rear_m"):
+    if key in ("wheelbase_m", "track_front_m", "track_rear_m", *HEIGHT_KEYS):
         return [(key, ABS_STEP, lambda h: moved_copy(v, **{key: getattr(v, key) + h}))]
     if key == "sensor_lateral_m":
         return [(f"{key}[{CORNERS[c]}]", ABS_STEP, lateral(c)) for c in sensors]

@@ -58,8 +58,8 @@ def refinement_contributions(objective: FullWhittle, theta: np.ndarray, theta_co
     _, linv = objective.factored(theta)
     S = objective.node_spectrum(theta)
     jac = model.physical_jacobian(theta)
-    moves = [(name, step, move(step), tol) for key, tol in vehicle.tolerances.to_dict().items()
-             if tol > 0 and key not in (skip or set()) for name, step, move in _moves(vehicle, model, key)]
+    moves = [(name, step, move(step), tol) for key, tol in vehicle.tolerances.applying(vehicle).items()
+             if key not in (skip or set()) for name, step, move in _moves(vehicle, model, key)]
     order = [name for name, *_ in moves]
     changes: dict[str, np.ndarray] = {}  # name -> dS along the move, per unit step
     corner_moves = [(m[0], d) for m in moves if (d := _corner_direction(vehicle, *m[2], m[1])) is not None]

@@ -35,13 +35,14 @@ from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.covariance import inverse_information, kept
 from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
 from rozyn_estimator.method.likelihood.objective import WhittleObjective, whitened
-from rozyn_estimator.tolerances import RELATIVE_FIELDS
+from rozyn_estimator.tolerances import HEIGHT_KEYS, RELATIVE_FIELDS
 from rozyn_estimator.vehicle import Vehicle
 
 _REL_STEP = 1e-4  # relative step of a stiffness, damping or mass
 _ABS_STEP = {"wheelbase_m": 1e-4, "sensor_front_offset_m": 1e-4, "sensor_rear_offset_m": 1e-4,
+             "cog_height_m": 1e-4, "wheel_centre_height_m": 1e-4,
              "sensor_gain_front": 1e-4, "sensor_gain_rear": 1e-4, "sensor_time_offset_s": 1e-6}
-GEOMETRY = ("wheelbase_m", "sensor_front_offset_m", "sensor_rear_offset_m")
+GEOMETRY = ("wheelbase_m", "sensor_front_offset_m", "sensor_rear_offset_m", *HEIGHT_KEYS)
 SENSORS = ("sensor_gain_front", "sensor_gain_rear", "sensor_time_offset_s")
 ASSUMED = (*RELATIVE_FIELDS, *GEOMETRY, *SENSORS)  # every value a sensitivity can be asked for
 _MOVE = 0.01  # a warm update keeps the sensitivities while ln m, ln I, logit(lf/L) move less
