@@ -10,7 +10,7 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*", "sim_node"]),
-    package_data={PACKAGE: ["py.typed"], "sim_node": ["py.typed"]},
+    package_data={PACKAGE: ["py.typed"], "sim_node": ["py.typed", "drive_cycles/*.csv"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -16,17 +16,20 @@ sensors' low-pass; the half car stays the default and its runs are unchanged.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 
+from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.parameters import check, param
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import CORNERS, MODELS, FullVehicle
 from sim_node import fullcar
 from sim_node.departures import Departures
+from sim_node.drive_cycle import DriveCycle, load_drive_cycle
 from sim_node.halfcar import N_DOF, N_STATE, HalfCarPlant, static_state
 from sim_node.road import Road, RoadSpec
 from sim_node.sensors import GRAVITY_MPS2, Accelerometers
@@ -55,6 +58,9 @@ class SimConfig:
                                    ros_name="")
     speed_period_s: float = param(60.0, "period of the speed change", unit="s", low=0.0, open_low=True,
                                   ros_name="")
+    drive_cycle_file: str = param("", "drive cycle the vehicle follows instead of speed_kmh: a shipped one "
+                                  "(udds, hwfet, wltc3b) or a CSV of time_s and speed_kmh (or speed_mps, "
+                                  "speed_mph), repeated; empty: constant speed", read_only=True)
     rate_hz: float = param(100.0, "accelerometer rate", unit="Hz", low=1.0, high=100_000.0, read_only=True)
     # 1 kHz: the plant holds the road linear over a step; at 500 Hz that hold's images, aliased
     # into the sensors' band, were what the estimator's model check saw on quiet sensors
@@ -81,6 +87,8 @@ class SimConfig:
     def __post_init__(self) -> None:
         check(self, (
             ("speed_variation", lambda c: c.speed_variation < 1.0, "must lie in [0, 1)"),
+            ("speed_variation", lambda c: c.speed_variation == 0.0 or not c.drive_cycle_file,
+             "a drive cycle sets the speed: speed_variation must be 0 with drive_cycle_file"),
             ("initial_state", lambda c: c.initial_state is None or len(c.initial_state) == c.n_state,
              f"expected {N_STATE} numbers ({fullcar.N_STATE} with model full)"),
             ("departures", lambda c: c.departures.lowpass_hz < 0.5 * c.rate_hz * c.oversample,
@@ -94,10 +102,19 @@ class SimConfig:
             ("bias_mps2", lambda c: c.model == "half" or c.bias_mps2 == (0.0, 0.0),
              "the full car's accelerometers take no bias: must be (0, 0) with model full"),
         ))
+        try:
+            self.drive_cycle  # noqa: B018 (loaded and checked now, not at the first step)
+        except ConfigError as exc:
+            raise ConfigError(f"drive_cycle_file: {exc}") from None
 
     @property
     def speed_mps(self) -> float:
         return self.speed_kmh / 3.6
+
+    @functools.cached_property
+    def drive_cycle(self) -> DriveCycle | None:
+        """The drive cycle ``drive_cycle_file`` names (None: constant speed); ConfigError if unusable."""
+        return load_drive_cycle(self.drive_cycle_file) if self.drive_cycle_file else None
 
     @property
     def plant_vehicle(self) -> Vehicle | FullVehicle:
@@ -192,6 +209,9 @@ class Simulation:
         """Distance the rear axle has travelled at ``t_s``, from the road's origin [m]."""
         cfg = self.config
         t = np.asarray(t_s, dtype=float) + cfg.settle_s
+        if cfg.drive_cycle is not None:  # the cycle starts at t = 0; the settling drives its end
+            cycle = cfg.drive_cycle
+            return cycle.distance_at(t - cfg.settle_s) - cycle.distance_at(np.array(-cfg.settle_s))
         s = cfg.speed_mps * t
         if cfg.speed_variation:
             w = 2.0 * np.pi / cfg.speed_period_s
@@ -200,6 +220,8 @@ class Simulation:
 
     def speed_at(self, t_s: np.ndarray) -> np.ndarray:
         cfg = self.config
+        if cfg.drive_cycle is not None:
+            return cfg.drive_cycle.speed_at(t_s)
         t = np.asarray(t_s, dtype=float) + cfg.settle_s
         w = 2.0 * np.pi / cfg.speed_period_s
         return cfg.speed_mps * (1.0 + cfg.speed_variation * np.sin(w * t))

@@ -22,6 +22,10 @@ def add_run_options(p: argparse.ArgumentParser, roads: Sequence[str], amplitudes
                    help="Laplace road: variance of the section gamma variable (default: 1.0)")
     p.add_argument("--waviness", type=float, default=2.0, metavar="W", help="ISO waviness w (default: 2)")
     p.add_argument("--speed-kmh", type=float, default=100.0, help="vehicle speed (default: 100)")
+    p.add_argument("--drive-cycle", default="", metavar="NAME|FILE.csv",
+                   help="follow a drive cycle instead of --speed-kmh: udds (urban stop-and-go), hwfet "
+                        "(highway), wltc3b, or a CSV of time_s and speed_kmh (docs/simulator.md); the "
+                        "cycle repeats for longer runs (default: none)")
     p.add_argument("--duration-s", type=float, default=100.0, help="measurement time (default: 100)")
     p.add_argument("--rate-hz", type=float, default=100.0, help="accelerometer rate (default: 100)")
 

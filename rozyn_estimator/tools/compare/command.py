@@ -87,7 +87,8 @@ def base_spec(args: argparse.Namespace) -> TrialSpec:
                                   sensor_rear_offset_m=args.sensor_offsets_m[1])
     return TrialSpec(
         road=args.road, road_class=args.road_class, amplitudes=args.amplitudes, laplace_nu=args.laplace_nu,
-        waviness=args.waviness, speed_kmh=args.speed_kmh, speed_variation=args.speed_variation,
+        waviness=args.waviness, speed_kmh=args.speed_kmh, drive_cycle=args.drive_cycle,
+        speed_variation=args.speed_variation,
         duration_s=args.duration_s, rate_hz=args.rate_hz, noise_fraction=args.noise,
         bias_mps2=tuple(args.bias_mps2), vehicle=vehicle, periodic=not args.endless_road,
         departures=Departures(**departure_values(args)), **vehicle_error_values(args),

@@ -78,7 +78,8 @@ def trial_spec(args: argparse.Namespace) -> TrialSpec:
     return TrialSpec(
         road=args.road, road_class=args.road_class, amplitudes=args.amplitudes,
         laplace_nu=args.laplace_nu, waviness=args.waviness, speed_kmh=args.speed_kmh,
-        duration_s=args.duration_s, rate_hz=args.rate_hz, noise_std_mps2=noise_std(args),
+        drive_cycle=args.drive_cycle, duration_s=args.duration_s, rate_hz=args.rate_hz,
+        noise_std_mps2=noise_std(args),
         noise_fraction=args.noise_fraction, vehicle=car.vehicle(args.vehicle),
         method=args.method or "likelihood", departures=Departures(**departure_values(args)),
         **vehicle_error_values(args), speed_error=args.speed_error,

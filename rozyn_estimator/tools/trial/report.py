@@ -48,7 +48,8 @@ def headline(spec: TrialSpec, n_seeds: int) -> str:
         road = f"full car: {road}, two tracks ({spec.sim_config(0).track_coherence} coherence)"
     method = _METHOD_LABELS.get(spec.method, f"method {spec.method}") if spec.car.name == "full" \
         else f"method {spec.method}"
-    return (f"{road}, {spec.speed_kmh:g} km/h, {spec.duration_s:g} s at {spec.rate_hz:g} Hz, "
+    speed = f"drive cycle {spec.drive_cycle}" if spec.drive_cycle else f"{spec.speed_kmh:g} km/h"
+    return (f"{road}, {speed}, {spec.duration_s:g} s at {spec.rate_hz:g} Hz, "
             f"{method}, {n_seeds} seed(s)")
 
 

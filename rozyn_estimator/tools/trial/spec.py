@@ -60,6 +60,8 @@ class TrialSpec:
                                            length=2)
     speed_variation: float = param(0.0, "relative amplitude of a sinusoidal speed change")
     speed_period_s: float = param(60.0, "period of the speed change", unit="s")
+    drive_cycle: str = param("", "drive cycle the vehicle follows instead of speed_kmh (a shipped name or a "
+                             "CSV file; sim_node.drive_cycle)")
     speed_error: float = param(0.0, "the estimator is told the speed times (1 + this): a wrong speed topic",
                                low=-1.0, open_low=True, high=100.0)
     periodic: bool = param(True, "road period = the record's distance (thesis eq 4-7); false: endless road")
@@ -110,7 +112,7 @@ class TrialSpec:
         car: dict[str, Any] = {"vehicle": self.vehicle} if self.car.name == "half" else \
             {"model": "full", "full_vehicle": self.vehicle}
         return SimConfig(
-            **car, road=road, seed=seed, speed_kmh=self.speed_kmh,
+            **car, road=road, seed=seed, speed_kmh=self.speed_kmh, drive_cycle_file=self.drive_cycle,
             speed_variation=self.speed_variation, speed_period_s=self.speed_period_s,
             rate_hz=self.rate_hz, noise_std_mps2=self.noise_std_mps2, bias_mps2=self.bias_mps2,
             duration_s=self.duration_s if self.periodic else 0.0, departures=self.departures,
