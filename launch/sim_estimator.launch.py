@@ -1,7 +1,7 @@
 """The simulator on sim time, the estimator on /clock, and (optionally) the recorder.
 
     ros2 launch rozyn_estimator sim_estimator.launch.py [road:=laplace] [class:=B]
-        [amplitudes:=fixed] [speed_kmh:=50] [duration_s:=300] [vehicle_file:=my_car.yaml]
+        [amplitudes:=fixed] [speed_kmh:=50 | drive_cycle:=udds] [duration_s:=300] [vehicle_file:=my_car.yaml]
         [model:=full] [record:=true] [bag_dir:=bags] [real_time_factor:=5]
 
 The simulator (``config/sim.yaml``, on sim time at ``real_time_factor`` times real time,
@@ -44,6 +44,9 @@ def generate_launch_description() -> LaunchDescription:
         DeclareLaunchArgument("amplitudes", default_value="gaussian", choices=["fixed", "gaussian"],
                               description="gaussian (a true random road) or fixed (the thesis' generator)"),
         DeclareLaunchArgument("speed_kmh", default_value="100.0", description="vehicle speed [km/h]"),
+        DeclareLaunchArgument("drive_cycle", default_value="",
+                              description="follow a drive cycle instead of speed_kmh: udds, hwfet, wltc3b "
+                                          "or a CSV of time_s and speed_kmh"),
         DeclareLaunchArgument("duration_s", default_value="0.0",
                               description="simulated time [s] (the launch ends with it); 0: until Ctrl-C"),
         DeclareLaunchArgument("real_time_factor", default_value="5.0",
@@ -72,6 +75,7 @@ def generate_launch_description() -> LaunchDescription:
                 "road.class": ParameterValue(arg("class"), value_type=str),
                 "road.amplitudes": ParameterValue(arg("amplitudes"), value_type=str),
                 "speed_kmh": ParameterValue(arg("speed_kmh"), value_type=float),
+                "drive_cycle_file": ParameterValue(arg("drive_cycle"), value_type=str),
                 "duration_s": ParameterValue(arg("duration_s"), value_type=float),
                 "real_time_factor": ParameterValue(arg("real_time_factor"), value_type=float),
                 "vehicle_file": vehicle,

@@ -162,7 +162,9 @@ class SimNode(Node):
         pace = (f"sim time at {self._rtf:g}x" if self._rtf else "sim time, as fast as possible") \
             if self._sim_mode else "real time"
         c = self.config
-        self.get_logger().info(f"simulating {road} at {c.speed_kmh:g} km/h, {c.rate_hz:g} Hz, {pace}")
+        speed = f"following the drive cycle {c.drive_cycle_file}" if c.drive_cycle_file else \
+            f"at {c.speed_kmh:g} km/h"
+        self.get_logger().info(f"simulating {road} {speed}, {c.rate_hz:g} Hz, {pace}")
 
     def _imu_template(self, frame_id: str) -> Imu:
         msg = Imu()

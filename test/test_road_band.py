@@ -14,7 +14,7 @@ from rozyn_estimator.method.full import estimate_full
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.likelihood import HalfCarSpectrum
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
-from rozyn_estimator.method.likelihood.road_input import spatial_band
+from rozyn_estimator.method.likelihood.road_input import driving_speed, spatial_band
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
@@ -32,7 +32,8 @@ def test_the_band_ends_at_the_profiles_end_times_the_speed():
     assert share[f == 50.0][0] == pytest.approx(0.5)
     assert np.all(np.diff(share) <= 0.0)
     assert np.array_equal(spatial_band(-f, 10.0, 5.0), share)  # negative aliases alike
-    assert np.array_equal(spatial_band(f, np.array([8.0, 12.0]), 5.0), share)  # the mean speed
+    drive = np.array([8.0, 12.0])  # a varying drive's: its driving speed, Σ v³ / Σ v²
+    assert np.array_equal(spatial_band(f, drive, 5.0), spatial_band(f, driving_speed(drive), 5.0))
     assert np.all(spatial_band(f, 10.0, 0.0) == 1.0)  # 0: no end
 
 

@@ -30,6 +30,13 @@ import numpy as np
 from rozyn_estimator.method.budget import Budget, Calibration, rozyn_contributions
 from rozyn_estimator.method.config import PARAM_NAMES, PipelineConfig
 from rozyn_estimator.method.correlation import correlation_sums
+from rozyn_estimator.method.drive import (
+    ROZYN_MAX_SPEED_VARIATION,
+    constant_speed_only,
+    speed_spread,
+    varying_drive,
+    window_speed,
+)
 from rozyn_estimator.method.fit import axle_shapes, characteristic_matrix, fit_inertia
 from rozyn_estimator.method.glitches import GlitchError, gate_glitches
 from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
@@ -146,12 +153,14 @@ def estimate(
     """
     cfg = config or PipelineConfig()
     started = time.perf_counter()
-    speed, profile = _speed(speed_mps)
+    speed, profile = window_speed(speed_mps)
     accel = np.asarray(accel_mps2)
     try:
         y, gated = checked_window(accel, fs_hz, cfg)
     except InputError as exc:
         return _failed(str(exc), int(accel.shape[0]) if accel.ndim >= 1 else 0, started)
+    if cfg.refine == "none" and (why := constant_speed_only(profile)):
+        return _failed(why, int(y.shape[0]), started)
     if cfg.refine == "none":
         est = _with_budget(_rozyn_stage(y, fs_hz, vehicle, cfg, speed, started), vehicle, cfg)
     else:
@@ -171,16 +180,6 @@ def _carried_guard_std(warm_start: Estimate | np.ndarray | None) -> np.ndarray |
         return None
     std = warm_start.guard_std
     return std if np.all(np.isfinite(std)) else None
-
-
-def _speed(speed_mps: float | np.ndarray | None) -> tuple[float | None, float | np.ndarray | None]:
-    """(mean speed, speed for the refinement), None where it is unknown."""
-    if speed_mps is None:
-        return None, None
-    v = np.asarray(speed_mps, dtype=float)
-    if v.size == 0 or not np.all(np.isfinite(v)) or not np.all(v > 0):
-        return None, None
-    return float(v.mean()), (float(v) if v.ndim == 0 else v)
 
 
 def _rozyn_stage(
@@ -275,6 +274,8 @@ def _refined(
             n_samples=n, elapsed_ms=elapsed, notes=notes + ref.notes, stage="likelihood",
             rozyn=rozyn, refinement=ref, guard_std=guard_std,
         )
+    if rozyn.ok and speed_spread(speed) > ROZYN_MAX_SPEED_VARIATION:
+        return _failed(varying_drive(ref.reason, speed), n, started, rozyn=rozyn, refinement=ref)
     if rozyn.ok:
         return dataclasses.replace(
             _with_budget(rozyn, vehicle, cfg), elapsed_ms=elapsed, rozyn=rozyn, refinement=ref,

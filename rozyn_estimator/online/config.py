@@ -7,6 +7,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
+from rozyn_estimator.method.likelihood.road_input import DRIVING_MPS
 from rozyn_estimator.parameters import check, param
 
 MIN_SPEED_MPS = 0.1  # a known speed below walking pace is a typo (1e-308), not a drive
@@ -44,8 +45,12 @@ class OnlineConfig:
                                unit="s", low=0.001, high=3600.0)
     silence_s: float = param(2.0, "a sensor silent this long is reported as waiting", unit="s",
                              low=0.01, high=3600.0)
-    max_speed_variation: float = param(0.1, "windows whose (max - min)/mean speed exceeds this are not used",
-                                       low=0.001, high=10.0)
+    max_speed_variation: float = param(10.0, "windows whose (max - min)/driving speed exceeds this are not "
+                                       "used (10: none refused; a varying drive is modelled)", low=0.001,
+                                       high=10.0)
+    driving_speed_mps: float = param(DRIVING_MPS, "below this speed the vehicle stands: standing time does "
+                                     "not fill the window, and at a stop the last estimate is held",
+                                     unit="m/s", low=0.0, high=MAX_SPEED_MPS)
     speed_mps: float = param(0.0, "vehicle speed when no speed samples arrive; 0: unknown", unit="m/s",
                              low=0.0, high=MAX_SPEED_MPS)
     speed_silence_s: float = param(2.0, "once a speed topic has spoken, a window in which it is silent this "

@@ -54,6 +54,7 @@ from rozyn_estimator.method.full import FullEstimate
 from rozyn_estimator.online.batch import SpeedSamples, clean_batch, trigger_of
 from rozyn_estimator.online.channel import Channel
 from rozyn_estimator.online.config import OnlineConfig, speed_problem
+from rozyn_estimator.online.driving import driving_start
 from rozyn_estimator.online.estimator_config import EstimatorConfig
 from rozyn_estimator.online.records import ERROR, NS, WARN, Health, Job, Layout, Level, Update, layout_of
 from rozyn_estimator.online.status import health_values, status
@@ -326,10 +327,9 @@ class OnlineEstimator:
         return jobs
 
     def _trim(self, updated: bool) -> None:
-        """Forget the samples older than the next update's window, and in any case those
-        more than two windows and an update period behind the channel's newest: a silent
-        sensor holds up the schedule, not the memory. A window's samples are lost only when
-        a sensor's stamps lead the other's by more than a window. After an update each
+        """Forget the samples older than the next update's reach (two windows, :mod:`.driving`),
+        and in any case those more than two windows and an update period behind the channel's
+        newest: a silent sensor holds up the schedule, not the memory. After an update each
         channel is trimmed; otherwise once it holds a window more than that (cheap per sample).
         """
         window = round(self._config.window_s * NS)
@@ -341,7 +341,7 @@ class OnlineEstimator:
                 continue
             keep = ch.last_ns - horizon
             if self._next_due_ns is not None:
-                keep = max(keep, self._next_due_ns - window)
+                keep = max(keep, self._next_due_ns - 2 * window)  # a window reaches back over stops
             if oldest < keep - slack:
                 ch.trim(keep)
 
@@ -355,11 +355,11 @@ class OnlineEstimator:
         reached = min(t for t in lasts if t is not None)
         if reached < self._next_due_ns:
             return _NONE
-        window = round(self._config.window_s * NS)
-        jobs = []
+        window, cfg, jobs = round(self._config.window_s * NS), self._config, []
         while reached >= self._next_due_ns:
-            due = self._next_due_ns
-            lo = due - window
+            due = self._next_due_ns  # the window reaches back over standing time, at most 2 windows
+            lo = driving_start(self._speed.window(due - 2 * window, due), due, window, 2 * window,
+                               cfg.driving_speed_mps)
             samples = tuple(ch.window(lo, due) for ch in self._channels)
             jobs.append(Job(due, samples, self._speed.window(lo, due), self._epoch, self._speed_source))
             self._next_due_ns = due + period

@@ -119,6 +119,7 @@ class Update:
     window_fill: float = 0.0
     fs_hz: float = 0.0
     speed_mps: float | None = None
+    held: bool = False  # at a stop: the last estimate, republished
 
     @property
     def published(self) -> bool:
@@ -160,6 +161,8 @@ def update_values(update: Update, layout: Layout = HALF_LAYOUT) -> dict[str, str
     }
     if update.speed_mps is not None:
         out["speed_mps"] = f"{update.speed_mps:.3f}"
+    if update.held:
+        out["held"] = "true"
     est = update.estimate
     if est is None:
         return out

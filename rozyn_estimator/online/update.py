@@ -15,8 +15,10 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from rozyn_estimator.method import Estimate, PipelineConfig, estimate
+from rozyn_estimator.method.drive import speed_spread, window_speed
 from rozyn_estimator.method.full import FullEstimate, estimate_full
 from rozyn_estimator.online.config import OnlineConfig
+from rozyn_estimator.online.driving import driving_time_s, standing
 from rozyn_estimator.online.pairing import align_channels
 from rozyn_estimator.online.records import ERROR, HALF_LAYOUT, NS, OK, WARN, Job, Layout, Update
 from rozyn_estimator.vehicle import Vehicle
@@ -63,13 +65,23 @@ def _compute(job: Job, names: Sequence[str], cfg: OnlineConfig, vehicle: Vehicle
     if isinstance(paired, str):
         return Update(job.due_ns, ERROR, paired)
     t_ns, accel, fs = paired
-    fill = min(1.0, (t_ns[-1] - t_ns[0]) / NS / cfg.window_s) if t_ns.size > 1 else 0.0
     stamp = int(t_ns[-1]) if t_ns.size else job.due_ns
+    stands = standing(job.speed, cfg.driving_speed_mps)
+    if stands is not None:  # at a stop the last estimate stands: a stack reading it has the current answer
+        if warm is not None and warm.ok:
+            return Update(stamp, OK, f"held: the vehicle stands ({stands:.1f} m/s); the last estimate stands",
+                          warm, fs_hz=fs, speed_mps=stands, held=True)
+        return Update(stamp, OK, f"the vehicle stands ({stands:.1f} m/s): no estimate yet", fs_hz=fs,
+                      speed_mps=stands)
+    span = (t_ns[-1] - t_ns[0]) / NS if t_ns.size > 1 else 0.0
+    driving = driving_time_s(job.speed, int(t_ns[0]), int(t_ns[-1]), cfg.driving_speed_mps) \
+        if job.speed[1].size and t_ns.size > 1 else span  # standing time does not fill the window
+    fill = min(1.0, driving / cfg.window_s)
     if fill < cfg.min_window_fill:
         missing = [n for n, ch in zip(names, job.samples, strict=True) if ch[0].size == 0]
         need = f"{cfg.min_window_fill * 100:.0f} % of {cfg.window_s:g} s"
         why = f"waiting for {missing[0]}: no samples in the window" if missing else \
-            f"window {fill * 100:.0f} % full (need {need})"
+            f"window {fill * 100:.0f} % full (need {need}{' of driving' if driving < span else ''})"
         return Update(stamp, WARN if missing else OK, why, window_fill=fill, fs_hz=fs)
     speed: float | np.ndarray | None = cfg.speed_mps or None
     silent = _speed_silence_s(job, t_ns) if job.speed_source else 0.0
@@ -79,22 +91,21 @@ def _compute(job: Job, names: Sequence[str], cfg: OnlineConfig, vehicle: Vehicle
                       window_fill=fill, fs_hz=fs)
     if job.speed[1].size:
         s = job.speed[1]
-        mean_speed = float(np.mean(s))
-        if mean_speed > 0 and (s.max() - s.min()) / mean_speed > cfg.max_speed_variation:
-            return Update(stamp, WARN, f"speed varied {(s.max() - s.min()) / mean_speed * 100:.0f} % within "
-                          f"the window (max {cfg.max_speed_variation * 100:.0f} %): not used",
-                          window_fill=fill, fs_hz=fs, speed_mps=mean_speed)
+        spread = speed_spread(s)
+        if spread > cfg.max_speed_variation:
+            return Update(stamp, WARN, f"speed varied {spread * 100:.0f} % within the window (max "
+                          f"{cfg.max_speed_variation * 100:.0f} %): not used", window_fill=fill, fs_hz=fs,
+                          speed_mps=float(np.mean(s)))
         # one speed per sample: the refinement models the varying wheelbase delay
         speed = np.interp(t_ns.astype(float), job.speed[0].astype(float), s)
     est: Estimate | FullEstimate
     if isinstance(vehicle, FullVehicle):
-        mean = None if speed is None else float(np.mean(speed))
-        est = estimate_full(accel, fs, vehicle, pipeline, speed_mps=mean, sensors=layout.channels,
+        est = estimate_full(accel, fs, vehicle, pipeline, speed_mps=speed, sensors=layout.channels,
                             warm=warm if isinstance(warm, FullEstimate) else None)
     else:
         est = estimate(accel, fs, vehicle, pipeline, speed_mps=speed,
                        warm_start=warm if isinstance(warm, Estimate) else None)
-    speed_mps = None if speed is None else float(np.mean(speed))
+    speed_mps = window_speed(speed)[0]
     if not est.ok:
         return Update(stamp, WARN, f"identification failed: {est.reason}", est, fill, fs, speed_mps)
     if not _publishable(est, layout):  # never publish a made-up number, whatever the pipeline returns

@@ -8,13 +8,11 @@ parameters; the road's intensity, waviness and shape; the tracks' coherence scal
 floor per sensor) by scipy's trust-region method with the analytic gradient and the Fisher
 information as its Hessian (scoring), until the Newton decrement is below ``tol``.
 
-Work (one update within 3x the half car's): the model is evaluated on a 0.05 Hz
-grid and interpolated (:mod:`.grid`; ``grid_hz``; at every frequency once a noise floor runs
-to zero, where S is nearly singular), the optimiser's Hessian sums over every 3rd frequency
-(:mod:`.whittle`), and a cold start is first fitted to means over 0.1 Hz (:func:`.means.coarse_fit`:
-far from the optimum the likelihood's broad shape suffices), which leaves the fine fit a
-step or two (often none where the calibration follows: it completes the fit). The
-estimates stay within 0.05 of their std of the exact computation's (tested).
+Work (one update within 3x the half car's): the model is evaluated on a 0.05 Hz grid and
+interpolated (:mod:`.grid`; ``grid_hz``; at every frequency once a noise floor runs to zero),
+the optimiser's Hessian sums over every 3rd frequency (:mod:`.whittle`), and a cold start is
+first fitted to means over 0.1 Hz (:func:`.means.coarse_fit`), which leaves the fine fit a step
+or two (often none where the calibration follows), within 0.05 std of the exact fit (tested).
 
 Starts: the previous window's optimum when there is one (warm), else Rozyn's estimate,
 for at most 25 iterations; when that gives no finite likelihood, explains a channel as
@@ -39,11 +37,11 @@ nuisances' uncertainty included) with the score's covariance under the model, wh
 what the taper correlates (:mod:`.score`; a warm update keeps its ratio to the inverse
 Fisher information while the window's length stays and its body parameters move by less
 than 1 %), mapped to the physical parameters, and raised where the road is not stationary
-(:mod:`.intermittency`: by the road's intermittency, where the road's own part
-carries the information). What
-the vehicle's tolerances add comes from :mod:`.uncertainty.refine_budget` (a warm update keeps the
-previous window's while its body parameters moved by less than 1 % (1 cm for the lateral CoG): the
-contributions are sensitivities of the model at θ).
+(:mod:`.intermittency`: by the road's intermittency, where the road's own part carries the
+information). What the vehicle's tolerances add comes from :mod:`.uncertainty.refine_budget` (a
+warm update keeps the previous window's while its body parameters moved by less than 1 % (1 cm
+for the lateral CoG): the contributions are sensitivities of the model at θ). A varying drive's
+window is masked to its steady driving (:func:`~rozyn_estimator.method.likelihood.road_input.steady_window`).
 """
 
 from __future__ import annotations
@@ -75,10 +73,11 @@ from rozyn_estimator.method.full.uncertainty.refine_budget import refinement_con
 from rozyn_estimator.method.full.whittle import FullWhittle, ridged, scoring
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.covariance import NOISE_AT_ZERO
-from rozyn_estimator.method.likelihood.fitcheck import ModelFit, neighbour_correlation
+from rozyn_estimator.method.likelihood.fitcheck import ModelFit, neighbour_correlation, unsteady_fit
 from rozyn_estimator.method.likelihood.newton import aground
+from rozyn_estimator.method.likelihood.road_input import steady_window, unsteady
 from rozyn_estimator.method.likelihood.score import SandwichRatio
-from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, window_spectra
+from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, taper_window, window_spectra
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
 
 _MIN_NOISE = 1e-9  # the model's fixed white floor, share of each channel's band power
@@ -174,11 +173,11 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
             warm: FullRefinement | None, given: Spectra | None = None) -> FullRefinement:
     band = cfg.band_at(fs)
     v = np.atleast_1d(np.asarray(speed, dtype=float))
-    if not (v.size and np.all(np.isfinite(v)) and np.all(v > 0)):
+    if not (v.size and np.all(np.isfinite(v)) and np.all(v >= 0) and np.any(v > 0)):  # standing: no road
         raise _FitError("likelihood fit needs a positive speed")
     if v.size not in (1, y.shape[0]):
         raise _FitError(f"speed: expected 1 or {y.shape[0]} values, got {v.size}")
-    spectra = _spectra(y, fs, band, cfg.taper, given)
+    spectra = _spectra(steady_window(y, vehicle.wheelbase_m, v, fs), fs, band, cfg.taper, given)
     if spectra.freq_hz.size < 50:
         raise _FitError(f"too few frequencies in {band[0]:g}-{band[1]:g} Hz")
     power = band_power(spectra)
@@ -195,11 +194,11 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
                             road_shape_terms=cfg.road_shape_terms, min_noise_psd=_MIN_NOISE * power,
                             kernel_m2_hz2=kernel, road_max_cpm=cfg.road_max_cpm,
                             sensor_values=None if assumed is None else assumed.values,
-                            grid_hz=0.0 if _noise_free(warm, power) else cfg.grid_hz)
+                            grid_hz=0.0 if _noise_free(warm, power) else cfg.grid_hz,
+                            sample_weights=taper_window(y.shape[0], cfg.taper) ** 2 if v.size > 1 else None)
     objective = FullWhittle(model, periodogram, counts)
     best: OptimizeResult | None = None
     iterations = starts = 0
-
     ahead = coarse_fit(spectra, y.shape[0], model, cfg)
     # a cold fit hands over to the calibration's Newton steps once within their range
     calibrating = bool(groups or corners)
@@ -293,7 +292,8 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     cov = np.sqrt(factors)[:, None] * cov * np.sqrt(factors)[None, :]
     # a calibration's shares are checked with it: what they absorbed counts as fitted dof
     checked, at = (objective, theta) if posterior is None else (posterior.objective, posterior.point)
-    fit = full_model_fit(checked, at, spectra, step, neighbour_correlation(spectra.window_dft))
+    fit = unsteady_fit(spectra.freq_hz) if unsteady(vehicle.wheelbase_m, speed, fs) else \
+        full_model_fit(checked, at, spectra, step, neighbour_correlation(spectra.window_dft))
     if (fit is not None and fit.misfit) or (calibration is not None and calibration.departures()):
         told = check_full_speed(uncalibrated[0], periodogram, counts, cfg, *uncalibrated[1:], y.shape[0] / fs)
         if told.wrong:

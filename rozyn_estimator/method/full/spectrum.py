@@ -1,33 +1,25 @@
 """The full car's spectral model: :class:`FullCarSpectrum` (the k×k spectral matrix of three
 or four body accelerometers driven by two coherent road tracks, its parameters θ and dS/dθ).
 
-The half car's model (:mod:`rozyn_estimator.method.likelihood.model`) carried to the whole
-body. Each corner is its suspension (with the anti-roll bars: springs between an axle's two
-corners, :func:`rozyn_estimator.method.full.fit.corner_matrices`) on its wheel on its tyre;
-condensing the wheels exactly, the corners push on the body with ``F = -Z(ω) x_c + T(ω) u``
-(4×4 each, known: they depend on the assumed vehicle only). The body's coordinates are taken
+The half car's model carried to the whole body. Each corner is its suspension (with the
+anti-roll bars: :func:`rozyn_estimator.method.full.fit.corner_matrices`) on its wheel on its
+tyre; condensing the wheels exactly, the corners push on the body with
+``F = -Z(ω) x_c + T(ω) u`` (4×4 each, known). The body's coordinates are taken
 at the front axle's centre, ``q = (z₀, φ, θ)``: a point ``(x, y)`` moves
-``z₀ - x φ + y θ`` (``B`` for the corners, ``P`` for the sensors), and the centre of gravity
-``t·q`` with ``t = (1, -l_f, y_c)``, so the mass matrix is ``M = m t tᵀ + diag(0, I_yy, I_xx)``
-(the half car's ``M_ax`` in three coordinates: the inertial parameters enter only there).
+``z₀ - x φ + y θ`` (``B`` for the corners, ``P`` for the sensors), the centre of gravity ``t·q``
+with ``t = (1, -l_f, y_c)``: ``M = m t tᵀ + diag(0, I_yy, I_xx)`` (the inertias enter only there).
 Per unit road velocity at the four wheels the accelerations are
 
     G(ω) = iω P D⁻¹ Bᵀ T(ω),   D = Bᵀ Z(ω) B - ω² M,
 
-and the spectral matrix of the sampled signals is
-
-    S(f) = σ² Σ_a r(f_a) G(ω_a) R(ω_a) G(ω_a)ᴴ + diag(n),
-
-with the half car's road shape ``r`` (ISO 8608's power law ``|f/f_ref|^(2-w)`` times smooth
-Legendre departures), its aliasing sum (of the road below its profile's end only:
-:func:`spatial_band`), a white noise floor per sensor, and the wheels' road
-velocity covariance ``R = [[Γ, Γ φ̄], [Γ φ, Γ]]`` (front wheels, then rear, each left and
-right): ``φ`` the rear wheels' delay behind the front ones (:func:`delay_characteristic`; the
-rear wheels run in the front ones' tracks), ``Γ = [[1, γ], [γ, 1]]`` the two tracks'
-coherence. ``γ`` is the isotropic surface's (Dodds & Robson 1973; Kamash & Robson 1978) for
-ISO's ``w = 2``: ``γ = x K₁(x)``, ``x = 2π n B e^c`` at the spatial frequency ``n = f / v``,
-``B`` the front track, ``c`` a fitted log scale of the tracks' separation (a real road's
-coherence is not exactly the isotropic surface's: its one nuisance).
+and the sampled signals' spectral matrix is ``S(f) = σ² Σ_a r(f_a) G(ω_a) R(ω_a) G(ω_a)ᴴ + diag(n)``
+with the half car's road shape ``r`` and aliasing sum (:func:`spatial_band`), a white noise
+floor per sensor, and the wheels' road velocity covariance ``R = [[W Γ, Γ φ̄], [Γ φ, W Γ]]``
+(front wheels, then rear, each left and right): ``φ`` the rear wheels' delay behind the front
+ones in their tracks (``W = 1``; a varying drive's mixture: :func:`road_mixture`), ``Γ = [[1,
+γ], [γ, 1]]`` the tracks' coherence: the isotropic surface's (Dodds & Robson 1973; Kamash &
+Robson 1978) for ``w = 2``, ``γ = x K₁(x)``, ``x = 2π n B e^c`` at ``n = f / v``, ``B`` the
+front track, ``c`` a fitted log scale of the tracks' separation (its one nuisance).
 """
 
 from __future__ import annotations
@@ -46,7 +38,14 @@ from rozyn_estimator.gravity import gravity_height_m, rotation_inertia_kgm2, rot
 from rozyn_estimator.method.full.fit import corner_matrices, corner_response_derivatives
 from rozyn_estimator.method.full.grid import ALIAS_SPACING_HZ, alias_map, apply, evaluation_map
 from rozyn_estimator.method.full.uncertainty import sensing as sensor_model
-from rozyn_estimator.method.likelihood.road_input import delay_characteristic, spatial_band, track_coherence
+from rozyn_estimator.method.likelihood.road_input import (
+    TrackMixture,
+    delay_characteristic,
+    driving_speed,
+    is_varying,
+    spatial_band,
+    track_coherence,
+)
 from rozyn_estimator.vehicle_full import FullVehicle
 
 _CORNER_FIELDS = ("wheelbase_m", "track_front_m", "track_rear_m", "unsprung_mass_kg", "tyre_stiffness_npm",
@@ -64,7 +63,8 @@ class FullCarSpectrum:
         sensors: the corner index (0..3, FL FR RL RR) of each channel's accelerometer.
         freq_hz: (K,) the frequencies [Hz].
         fs_hz: sample rate [Hz] (for the aliasing terms).
-        speed_mps: the speed, constant or per sample [m/s].
+        speed_mps: the speed, constant or per sample [m/s]; per sample, ``sample_weights`` are
+            what each counts for (the taper's square: :func:`road_mixture`).
         aliases: aliasing terms ``a = -A..A``.
         f_ref_hz: the road shape's reference frequency.
         road_shape_terms: smooth departures of the road spectrum from a power law.
@@ -73,8 +73,7 @@ class FullCarSpectrum:
         kernel_m2_hz2: (K,) or a number: the second moment [Hz²] of the kernel that makes each
             periodogram ordinate a local average of S (the taper's spectral window, a group's
             spread of bins; :func:`expected_periodogram_m2`); 0: the model is S itself.
-        grid_hz: S is evaluated this far apart and interpolated (:mod:`.grid`); 0: at each
-            frequency.
+        grid_hz: S is evaluated this far apart and interpolated (:mod:`.grid`); 0: at each.
         road_max_cpm: the road's profile ends at this spatial frequency [cycles/m]: the
             aliases hold the road below it only (:func:`spatial_band`); 0: no end.
         calibrate: the sensors' values θ also holds (:data:`.sensing.GROUPS`: ``gain``, ``x``,
@@ -89,7 +88,7 @@ class FullCarSpectrum:
                  shape_edges_hz: tuple[float, float] | None = None,
                  kernel_m2_hz2: np.ndarray | float = 0.0, grid_hz: float = 0.0,
                  road_max_cpm: float = 0.0, calibrate: Sequence[str] = (),
-                 sensor_values: np.ndarray | None = None) -> None:
+                 sensor_values: np.ndarray | None = None, sample_weights: np.ndarray | None = None) -> None:
         self.freq_hz = freq_hz
         edges_hz = shape_edges_hz or (float(freq_hz.min()), float(freq_hz.max()))
         m2 = np.broadcast_to(np.asarray(kernel_m2_hz2, dtype=float), freq_hz.shape)
@@ -97,7 +96,7 @@ class FullCarSpectrum:
             vehicle=vehicle, sensors=sensors, fs_hz=fs_hz, speed_mps=speed_mps, aliases=aliases,
             f_ref_hz=f_ref_hz, road_shape_terms=road_shape_terms, min_noise_psd=min_noise_psd,
             shape_edges_hz=edges_hz, kernel_m2_hz2=m2, grid_hz=grid_hz, road_max_cpm=road_max_cpm,
-            calibrate=tuple(calibrate), sensor_values=sensor_values)
+            calibrate=tuple(calibrate), sensor_values=sensor_values, sample_weights=sample_weights)
         self.sensors = tuple(sensors)
         self.k = len(self.sensors)
         self.rear = np.array([c in (2, 3) for c in self.sensors], dtype=float)
@@ -113,8 +112,11 @@ class FullCarSpectrum:
         self.n_freq, self.n_alias_terms, self.n_alias_nodes = nodes.size, shifts.size, alias_nodes.size
         f = np.r_[nodes, (alias_nodes[None, :] + shifts[:, None]).ravel()]  # the band's nodes, then aliases'
         self.omega = 2.0 * np.pi * f
-        self.speed_mps = speed_mps
-        self.alias_road = np.r_[np.ones(nodes.size), spatial_band(f[nodes.size:], speed_mps, road_max_cpm)]
+        self.speed_mps, self.sample_weights, self.road_max_cpm = speed_mps, sample_weights, road_max_cpm
+        self.fs_hz = fs_hz
+        self.varying = is_varying(speed_mps)  # a varying drive's mixture carries the road's end
+        self.alias_road = np.r_[np.ones(nodes.size), np.ones(f.size - nodes.size) if self.varying else
+                                spatial_band(f[nodes.size:], speed_mps, road_max_cpm)]
         self.log_shape = np.log(np.abs(f) / f_ref_hz)
         edges = np.log(np.array(edges_hz) / f_ref_hz)
         x = (2.0 * self.log_shape - edges.sum()) / (edges[1] - edges[0])
@@ -163,8 +165,7 @@ class FullCarSpectrum:
         return out
 
     def assume_sensors(self, sensor_values: np.ndarray) -> None:
-        """From now on the model assumes the sensors' departures ``sensor_values`` (as the
-        constructor's; the body's motion stays cached: it does not depend on them)."""
+        """From now on the model assumes the sensors' departures ``sensor_values``."""
         self._settings["sensor_values"] = sensor_values
         self.sensor_values = sensor_model.unpack(np.asarray(sensor_values, dtype=float), sensor_model.GROUPS,
                                                  self.k)
@@ -184,11 +185,14 @@ class FullCarSpectrum:
             self.body_input = B.T @ T  # Bᵀ T
             self.gravity_height_m = gravity_height_m(v)
             self.unsprung_total_kg = float(sum(v.unsprung_mass_kg))
-            phi = delay_characteristic(w, v.wheelbase_m, self.speed_mps)
-            mean_speed = float(np.mean(self.speed_mps))
-            self.x_coherence = 2.0 * np.pi * np.abs(w / (2.0 * np.pi)) / mean_speed * v.track_front_m
-            one = np.ones_like(phi)
-            self.delay = np.stack([one, phi.conj(), phi, one], axis=-1).reshape(-1, 2, 2)  # [[1, φ̄], [φ, 1]]
+            speeds = np.asarray(self.speed_mps)
+            self.mixture = TrackMixture(w, v.wheelbase_m, v.track_front_m, speeds, self.sample_weights,
+                                        self.road_max_cpm, self.fs_hz) if self.varying else None
+            share, phi = (self.mixture.share, self.mixture.phi) if self.mixture is not None else \
+                (np.ones(w.shape), delay_characteristic(w, v.wheelbase_m, self.speed_mps))
+            speed = driving_speed(self.speed_mps, self.sample_weights)  # the budget's coherence
+            self.x_coherence = 2.0 * np.pi * np.abs(w / (2.0 * np.pi)) / speed * v.track_front_m
+            self.delay = np.stack([share, phi.conj(), phi, share], axis=-1).reshape(-1, 2, 2)
         self.sensing = self.sensing_of(v, channel_factor)
 
     @contextlib.contextmanager
@@ -248,8 +252,7 @@ class FullCarSpectrum:
         return jac
 
     def _mass_matrix(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """M (3, 3) and dM/dθ for the five body parameters (5, 3, 3); the wheels' swing
-        through the geometry (``μ h²``, :mod:`rozyn_estimator.gravity`) adds to both rotations'."""
+        """M (3, 3) and dM/dθ (5, 3, 3); the wheels' swing ``μ h²`` adds to both rotations'."""
         m, ixx, iyy, lf, yc = self.physical(theta)
         t = np.array([1.0, -lf, yc])
         tt = np.outer(t, t)
@@ -263,21 +266,18 @@ class FullCarSpectrum:
         return M, dM
 
     def gravity_stiffness(self, theta: np.ndarray) -> np.ndarray:
-        """The weight's stiffness through the geometry (3, 3): ``-m g h`` on pitch and roll; linear
-        in m, so also its derivative by ln m."""
+        """The weight's stiffness ``-m g h`` on pitch and roll (3, 3), also its ln m derivative."""
         k = rotation_stiffness_nmprad(math.exp(theta[0]), self.gravity_height_m)
         return np.diag([0.0, k, k])
 
     # --- the model ----------------------------------------------------------------------
     def spectrum(self, theta: np.ndarray, derivatives: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
-        """S (K, k, k) and, if asked, dS/dθ (n_params, K, k, k); NaN where θ overflows (every
-        likelihood reads that as impossible)."""
+        """S (K, k, k) and, if asked, dS/dθ (n_params, K, k, k); NaN where θ overflows."""
         S, dS = self.node_spectrum(theta, derivatives)
         return self.to_targets(S), None if dS is None else self.to_targets(dS)
 
     def to_targets(self, m: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
-        """Stacked matrices at the nodes (..., nodes, k, k) -> the expectations at the model's
-        frequencies (..., K, k, k), or at ``rows`` of them only."""
+        """Matrices at the nodes (..., nodes, k, k) -> at the frequencies (..., K, k, k) or ``rows``."""
         if self._op is None:
             return m if rows is None else m[..., rows, :, :]
         if rows is None:
@@ -376,7 +376,9 @@ class FullCarSpectrum:
         inv_d = np.linalg.inv(self.body_stiffness + self.gravity_stiffness(theta)
                               - (self.omega**2)[:, None, None] * M)
         H = inv_d @ self.body_input
-        gamma, d_gamma = track_coherence(self.x_coherence * math.exp(theta[self.index["ln_coherence_scale"]]))
+        scale = math.exp(theta[self.index["ln_coherence_scale"]])
+        gamma, d_gamma = self.mixture.coherence(scale) if self.mixture is not None else \
+            track_coherence(self.x_coherence * scale)
         weight = self.road_weight(theta)[:, None, None]
         inputs = weight * self.road_inputs(gamma)
         motion = H @ inputs @ herm(H)
@@ -391,13 +393,14 @@ class FullCarSpectrum:
 
     def road_inputs(self, gamma: np.ndarray, diagonal: float = 1.0,
                     delay: np.ndarray | None = None) -> np.ndarray:
-        """R (F, 4, 4): the wheels' road velocity covariance for the tracks' coherence γ (and
-        the axles' ``delay`` (F, 2, 2), default the model's ``[[1, φ̄], [φ, 1]]``)."""
-        track = np.empty((gamma.size, 2, 2))
-        track[:, 0, 0] = track[:, 1, 1] = diagonal
-        track[:, 0, 1] = track[:, 1, 0] = gamma
-        axles = self.delay if delay is None else delay  # [f, a, i, b, j] = axles[f, a, b] track[f, i, j]
-        return (axles[:, :, None, :, None] * track[:, None, :, None, :]).reshape(-1, 4, 4)
+        """R (F, 4, 4): the wheels' road velocity covariance for the tracks' coherence γ (F,) (or
+        a mixture's ``G`` (F, 2, 2)) and the axles' ``delay`` (F, 2, 2), default the model's
+        ``[[W, φ̄], [φ, W]]``: ``R[f, a, i, b, j] = axles[f, a, b] δ_ij + G[f, a, b] (1 - δ_ij)``."""
+        axles = self.delay if delay is None else delay
+        G = gamma[:, None, None] * axles if gamma.ndim == 1 else gamma
+        eye = np.eye(2)[None, None, :, None, :]
+        out = diagonal * axles[:, :, None, :, None] * eye + G[:, :, None, :, None] * (1.0 - eye)
+        return out.reshape(-1, 4, 4)
 
     def fold(self, m: np.ndarray) -> np.ndarray:
         """(..., F, k, k) at the band's nodes and the aliases' -> (..., nodes, k, k): the

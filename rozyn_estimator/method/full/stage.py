@@ -32,6 +32,13 @@ import numpy as np
 
 from rozyn_estimator.method.config import PipelineConfig
 from rozyn_estimator.method.correlation import correlation_sums
+from rozyn_estimator.method.drive import (
+    ROZYN_MAX_SPEED_VARIATION,
+    constant_speed_only,
+    speed_spread,
+    varying_drive,
+    window_speed,
+)
 from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES, fit_full_inertia
 from rozyn_estimator.method.full.refine import FullRefinement, refine_full
 from rozyn_estimator.method.full.uncertainty.budget import FullBudget, full_contributions
@@ -128,6 +135,9 @@ def estimate_full(
         return FullEstimate(status="failed", reason=str(exc), sensors=tuple(sensors),
                             n_samples=int(accel.shape[0]) if accel.ndim else 0,
                             elapsed_ms=(time.perf_counter() - started) * 1e3)
+    if why := constant_speed_only(speed_mps):
+        return FullEstimate(status="failed", reason=why, sensors=tuple(sensors), n_samples=int(y.shape[0]),
+                            elapsed_ms=(time.perf_counter() - started) * 1e3)
     return dataclasses.replace(_rozyn_stage(y, fs_hz, vehicle, cfg, speed_mps, sensors, index, started),
                                glitches=gated)
 
@@ -181,6 +191,10 @@ def _refined(
                             notes=check + ref.notes + quick.notes,
                             budget=budget, stage="likelihood", rozyn=quick, refinement=ref, glitches=gated,
                             elapsed_ms=(time.perf_counter() - started) * 1e3)
+    if speed_spread(speed_mps) > ROZYN_MAX_SPEED_VARIATION:
+        return FullEstimate(status="failed", reason=varying_drive(ref.reason, speed_mps),
+                            sensors=tuple(sensors), n_samples=quick.n_samples, rozyn=quick, refinement=ref,
+                            glitches=gated, elapsed_ms=(time.perf_counter() - started) * 1e3)
     rozyn = _rozyn_stage(y, fs_hz, vehicle, rozyn_cfg, speed_mps, sensors, index, time.perf_counter())
     note = f"likelihood refinement failed ({ref.reason}); publishing the Rozyn estimate"
     return dataclasses.replace(rozyn, rozyn=quick, refinement=ref, notes=(note, *rozyn.notes), glitches=gated,
@@ -188,10 +202,8 @@ def _refined(
 
 
 def _mean_speed(speed_mps: float | np.ndarray | None) -> float | None:
-    if speed_mps is None:
-        return None
-    v = np.asarray(speed_mps, dtype=float)
-    return float(v.mean()) if v.size and np.all(np.isfinite(v)) else None
+    """The speed the window's road is seen at (None: unknown)."""
+    return window_speed(speed_mps)[0]
 
 
 def _sensor_indices(sensors: Sequence[str]) -> tuple[int, ...]:

@@ -41,12 +41,19 @@ import numpy as np
 
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.covariance import NOISE_AT_ZERO, CovarianceError, kept
-from rozyn_estimator.method.likelihood.fitcheck import ModelFit, model_fit
+from rozyn_estimator.method.likelihood.fitcheck import ModelFit, model_fit, unsteady_fit
 from rozyn_estimator.method.likelihood.model import CORNERS, HalfCarSpectrum
 from rozyn_estimator.method.likelihood.newton import Fits, aground, noise_share
 from rozyn_estimator.method.likelihood.objective import WhittleObjective
+from rozyn_estimator.method.likelihood.road_input import steady_window, unsteady
 from rozyn_estimator.method.likelihood.score import SandwichRatio
-from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, fast_length, window_spectra
+from rozyn_estimator.method.likelihood.spectra import (
+    Spectra,
+    band_power,
+    fast_length,
+    taper_window,
+    window_spectra,
+)
 from rozyn_estimator.method.likelihood.speedcheck import check_speed, half_car_speed
 from rozyn_estimator.method.likelihood.uncertainty.augment import plan
 from rozyn_estimator.method.likelihood.uncertainty.budget import uncertainty
@@ -170,17 +177,20 @@ def _refine(
 ) -> Refinement:
     band = cfg.band_at(fs)
     v = np.atleast_1d(np.asarray(speed, dtype=float))
-    if not (np.all(np.isfinite(v)) and np.all(v > 0)):
+    if not (np.all(np.isfinite(v)) and np.all(v >= 0) and np.any(v > 0)):  # standing samples carry no road
         return Refinement(status="failed", reason="likelihood fit needs a positive speed")
     if v.size not in (1, y.shape[0]):
         return Refinement(status="failed", reason=f"speed: expected 1 or {y.shape[0]} values, got {v.size}")
     L = vehicle.wheelbase_m
     n = fast_length(y.shape[0])  # the window's newest n samples (its FFTs' fast length)
     y, v = y[-n:], v[-n:] if v.size > 1 else v
-    spectra = window_spectra(y, fs, band, cfg.taper)
+    spectra = window_spectra(steady_window(y, L, v, fs), fs, band, cfg.taper)
     if spectra.freq_hz.size < 50:
         return Refinement(status="failed", reason=f"too few frequencies in {band[0]:g}-{band[1]:g} Hz")
-    model = HalfCarSpectrum(vehicle, spectra.freq_hz, fs, v if v.size > 1 else float(v[0]), cfg.aliases,
+    if v.size == 1 and v[0] == 0:
+        return Refinement(status="failed", reason="likelihood fit needs a positive speed")
+    varying = v.size > 1  # the wheelbase delays' mixture weighs each sample as the taper does
+    model = HalfCarSpectrum(vehicle, spectra.freq_hz, fs, v if varying else float(v[0]), cfg.aliases,
                             f_ref_hz=math.sqrt(band[0] * band[1]),
                             estimate_waviness=cfg.estimate_waviness,
                             estimate_suspension=cfg.estimate_suspension,
@@ -189,7 +199,8 @@ def _refine(
                             estimate_incoherence=cfg.estimate_incoherence,
                             window_weights=spectra.window_weights,
                             grid_step=1 if _noise_free(warm, spectra) else _bins(cfg.grid_hz, spectra),
-                            road_max_cpm=cfg.road_max_cpm)
+                            road_max_cpm=cfg.road_max_cpm,
+                            sample_weights=taper_window(n, cfg.taper) ** 2 if varying else None)
     objective = WhittleObjective(model, spectra, cfg.spectra)
     # A calibration's Newton step of the augmented posterior follows when there are values
     # to calibrate: it also completes the fit's last bit of convergence.
@@ -252,7 +263,8 @@ def _refine(
         # the published model's fit: what its free parameters absorb (their priors holding the
         # calibrated ones) sets the check's degrees of freedom
         free = kept(found.objective, found.objective.model, found.theta, found.objective.fisher(found.theta))
-        fit = model_fit(found.objective, found.theta, free, found.calibration)
+        fit = unsteady_fit(spectra.freq_hz) if unsteady(L, v, fs) else \
+            model_fit(found.objective, found.theta, free, found.calibration)
         notes += _speed_notes(model, spectra, cfg, theta, float(best.fun), fit, found.calibration)
     except (_FitError, CovarianceError) as exc:
         return Refinement(status="failed", reason=str(exc), params=None, theta=theta,

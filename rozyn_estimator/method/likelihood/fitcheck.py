@@ -40,6 +40,13 @@ Z_DEPARTURE = 4.0  # a calibrated sensor value this many posterior std from nomi
 FITS = "fits"
 NOT_COMPUTABLE = ("the model-fit check cannot be computed: the fitted spectral matrix is singular at some "
                   "frequencies (a channel fitted as noise-free)")
+UNSTEADY = ("not checked: the window holds stops or pulling away, masked out (the check's statistic "
+            "assumes a steady drive; on such windows it warned in 6 % of in-model urban windows)")
+
+
+def unsteady_fit(freq_hz: np.ndarray) -> ModelFit:
+    """The check's outcome on a window masked to its steady driving: not computed, no warning."""
+    return ModelFit(math.nan, 0.0, math.nan, (float(freq_hz[0]), float(freq_hz[-1])), UNSTEADY)
 
 
 @dataclass(frozen=True)
@@ -55,12 +62,13 @@ class ModelFit:
 
     @property
     def ok(self) -> bool:
-        return self.verdict == FITS
+        """Nothing to warn of: the model fits, or the window is not one the check can judge."""
+        return self.verdict in (FITS, UNSTEADY)
 
     @property
     def misfit(self) -> bool:
         """The check ran and the model does not fit (not: it could not be computed)."""
-        return self.verdict not in (FITS, NOT_COMPUTABLE)
+        return self.verdict not in (FITS, NOT_COMPUTABLE, UNSTEADY)
 
     def to_dict(self) -> dict[str, object]:
         def number(x: float) -> float | None:  # JSON has no NaN (a check that cannot be computed)

@@ -204,3 +204,15 @@ def lagrange_weights(x: np.ndarray, n_nodes: int, points: int = 8) -> tuple[np.n
         for m in nodes[nodes != j]:
             w[:, j] *= (t - m) / (j - m)
     return first, w
+
+
+def diagonal_part(m: np.ndarray) -> np.ndarray:
+    """The diagonal part of stacked 2x2 matrices (..., 2, 2)."""
+    out = np.zeros_like(m)
+    out[..., 0, 0], out[..., 1, 1] = m[..., 0, 0], m[..., 1, 1]
+    return out
+
+
+def hermitian_part(m: np.ndarray) -> np.ndarray:
+    """m + mᴴ per frequency (and row)."""
+    return m + m.conj().swapaxes(-1, -2)

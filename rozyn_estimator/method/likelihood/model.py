@@ -24,14 +24,13 @@ and the (two-sided) spectral matrix of the sampled signals is
 
     S(f) = σ² Σ_a r(f_a) G(ω_a) R(ω_a) G(ω_a)ᴴ + diag(n_f, n_r),   f_a = f + a·fs,
 
-``R = [[1, φ̄], [φ, 1]]`` with ``φ = E[e^(-iωτ)]`` over the window's speed profile (rank
-one at constant speed), ``r = |f / f_ref|^(2-w) exp(Σ c_d P_d(x))`` the road's shape (ISO
-8608's power law times smooth departures, ``P_d`` Legendre polynomials of degree ≥ 2 in
-log frequency ``x`` across the band), the sum over ``a = -A..A`` the aliasing of
-instantaneous sampling (of the road below its profile's end only: :func:`spatial_band`),
-and ``n_f, n_r`` white sensor noise. Optionally a share ``ε`` of
-the road part's diagonal is added as incoherent between the channels (a model-error
-floor; useful only on nearly noise-free data, where nothing else limits the coherence).
+``R = [[1, φ̄], [φ, 1]]``, ``φ = e^(-iωτ)`` at constant speed (rank one; a varying drive's
+mixture: :func:`road_mixture`), ``r = |f / f_ref|^(2-w) exp(Σ c_d P_d(x))`` the road's shape
+(ISO 8608's power law times Legendre departures in log frequency ``x``), the sum over
+``a = -A..A`` the aliasing of sampling (of the road below its profile's end only:
+:func:`spatial_band`), ``n_f, n_r`` white sensor noise. Optionally a share ``ε`` of the road
+part's diagonal is incoherent between the channels (a model-error floor, for nearly noise-free
+data).
 """
 
 from __future__ import annotations
@@ -47,12 +46,19 @@ from rozyn_estimator.gravity import gravity_height_m, rotation_inertia_kgm2, rot
 from rozyn_estimator.method.likelihood.corners import CORNERS, CornerState, corner_outer, sensor_dg
 from rozyn_estimator.method.likelihood.grid import (
     Reduction,
+    diagonal_part,
     evaluation_grid,
+    hermitian_part,
     interpolation,
     map_bins,
     reduction,
 )
-from rozyn_estimator.method.likelihood.road_input import delay_characteristic, spatial_band
+from rozyn_estimator.method.likelihood.road_input import (
+    delay_characteristic,
+    is_varying,
+    road_mixture,
+    spatial_band,
+)
 from rozyn_estimator.vehicle import Vehicle
 
 # Corner values θ can hold as log scale factors (``ln_<term>_<corner>``), in θ's order:
@@ -87,6 +93,8 @@ class HalfCarSpectrum:
             (:mod:`.grid`; the taper's smoothing is applied there too).
         road_max_cpm: the road's profile ends at this spatial frequency [cycles/m]: the
             aliases hold the road below it only (:func:`.road_input.spatial_band`); 0: no end.
+        sample_weights: with a speed per sample, what each counts for in the periodogram (the
+            taper's square; None: alike): the wheelbase delays' mixture is weighted by it.
     """
 
     def __init__(
@@ -97,7 +105,7 @@ class HalfCarSpectrum:
         window_weights: np.ndarray | None = None, calibrate_gain: bool = False,
         calibrate_time_offset: bool = False, shape_edges_hz: tuple[float, float] | None = None,
         corner_terms: tuple[str, ...] = (), sensor_positions: bool = False, grid_step: int = 1,
-        road_max_cpm: float = 0.0,
+        road_max_cpm: float = 0.0, sample_weights: np.ndarray | None = None,
     ) -> None:
         self.freq_hz, self.fs_hz, self.aliases, self.f_ref_hz = freq_hz, fs_hz, aliases, f_ref_hz
         self._settings: dict[str, Any] = dict(  # what variant() rebuilds the model from
@@ -107,7 +115,7 @@ class HalfCarSpectrum:
             estimate_incoherence=estimate_incoherence, window_weights=window_weights,
             calibrate_gain=calibrate_gain, calibrate_time_offset=calibrate_time_offset,
             shape_edges_hz=shape_edges_hz, corner_terms=corner_terms, sensor_positions=sensor_positions,
-            grid_step=grid_step, road_max_cpm=road_max_cpm,
+            grid_step=grid_step, road_max_cpm=road_max_cpm, sample_weights=sample_weights,
         )
         # the grid the model is evaluated on (cached: consecutive windows and the model's variants share it)
         at = evaluation_grid(freq_hz, fs_hz, aliases, f_ref_hz, window_weights, grid_step, road_shape_terms,
@@ -116,11 +124,13 @@ class HalfCarSpectrum:
         self.n_ext, self.n_freq, self.n_alias = freq_hz.size + 2 * self.half, freq_hz.size, 2 * aliases + 1
         self.omega, self.log_shape, self.shape_basis = at.omega, at.log_shape, at.shape_basis
         aliased = np.repeat(np.arange(-aliases, aliases + 1) != 0, self.n_eval)
+        self.varying, self.road_max_cpm = is_varying(speed_mps), road_max_cpm
         band = spatial_band(self.omega / (2.0 * np.pi), speed_mps, road_max_cpm)
-        self.alias_road = np.where(aliased, band, 1.0)  # the band keeps its road (S stays smooth)
+        # the band keeps its road (S stays smooth); a varying drive's mixture carries the road's end
+        self.alias_road = np.where(aliased & (not self.varying), band, 1.0)
         self.grid_step = grid_step
         self._reduction: Reduction | None = None  # the sparse map to the bins: built when first used
-        self.speed_mps = speed_mps
+        self.speed_mps, self.sample_weights = speed_mps, sample_weights
         self.rear_factor: np.ndarray | None = None  # assumed rear gain and delay (None: ideal)
         self.set_vehicle(vehicle)
         self.min_noise_psd = np.asarray(min_noise_psd, dtype=float)
@@ -162,11 +172,14 @@ class HalfCarSpectrum:
         self.vehicle = v
         self.wheelbase_m = L = v.wheelbase_m
         w = self.omega
-        phi = delay_characteristic(w, L, self.speed_mps)
-        # Front/rear road velocity covariance R = [[1, φ̄], [φ, 1]] = C Cᴴ, C lower triangular;
-        # at constant speed |φ| = 1 and the second column vanishes.
-        self.inputs = [np.array([np.ones_like(phi), phi])]
-        spread = 1.0 - np.abs(phi) ** 2
+        # Front/rear road velocity covariance R = [[W, φ̄], [φ, W]] = C Cᴴ, C lower triangular;
+        # at constant speed W = |φ| = 1 and the second column vanishes.
+        share, phi = road_mixture(w, L, np.asarray(self.speed_mps), self.sample_weights, self.road_max_cpm,
+                                  self.fs_hz) if self.varying else (np.ones(w.shape), delay_characteristic(
+                                      w, L, self.speed_mps))
+        root = np.sqrt(share)
+        self.inputs = [np.array([root, np.divide(phi, root, out=np.zeros_like(phi), where=root > 0)])]
+        spread = share - np.abs(self.inputs[0][1]) ** 2
         if np.max(spread) > 1e-12:
             self.inputs.append(np.array([np.zeros_like(phi), np.sqrt(np.maximum(spread, 0.0))]))
         x = np.asarray(v.sensor_x_m)
@@ -317,7 +330,7 @@ class HalfCarSpectrum:
             rank = self.reduction.bins(rank)
         k_inc = self.index.get("ln_incoherence")
         incoherence = np.exp(theta[k_inc]) if k_inc is not None else 0.0
-        S_road = rank + incoherence * self._diagonal(rank) if k_inc is not None else rank
+        S_road = rank + incoherence * diagonal_part(rank) if k_inc is not None else rank
         noise = np.exp(theta[4:6])
         S = S_road.copy()
         S[:, 0, 0] += noise[0] + self.min_noise_psd[0]
@@ -331,7 +344,7 @@ class HalfCarSpectrum:
                 dg = [w2 * np.einsum("abf,bf->af", Q, d_mass[j] @ xc) for xc in x]
                 if j == 0 and self.gravity_height_m != 0.0:  # K_g is linear in m
                     dg = [d - np.einsum("abf,bf->af", Q, geo @ xc) for d, xc in zip(dg, x, strict=True)]
-                road[name] = self._hermitian_part(self._outer_sum(dg, g, weight))
+                road[name] = hermitian_part(self._outer_sum(dg, g, weight))
         if self.estimate_waviness and "waviness" in want:
             road["waviness"] = self._fold(gg, -weight * self.log_shape)
         for name, basis in zip(self.names[self.shape_slice], self.shape_basis, strict=True):
@@ -341,21 +354,21 @@ class HalfCarSpectrum:
         if corner_rows:  # the corner values' rows, as one stack (likelihood/corners.py)
             state = CornerState(ks, cs, kt, ct, mt, zs, zt, wt, den)
             outer = corner_outer(state, corner_rows, w, Q, np.stack(self.inputs), np.stack(x), np.stack(g))
-            stacked = self._hermitian_part(self._fold(outer, weight))
+            stacked = hermitian_part(self._fold(outer, weight))
             road |= {f"ln_{q}_{CORNERS[k]}": m for (q, k), m in zip(corner_rows, stacked, strict=True)}
         for name, dg in sensor_dg(self, want, x, g, iw, rear).items():
-            road[name] = self._hermitian_part(self._outer_sum(dg, g, weight))
+            road[name] = hermitian_part(self._outer_sum(dg, g, weight))
         out = list(self.names) if rows is None else list(rows)
         at = {name: i for i, name in enumerate(out)}
         dS = np.zeros((len(out), self.n_freq if smooth else self.n_eval, 2, 2), dtype=complex)
         if road:
             smoothed = np.stack(list(road.values()))
             smoothed = self.reduction.bins(smoothed) if smooth else smoothed
-            dS[[at[name] for name in road]] = (smoothed + incoherence * self._diagonal(smoothed)
+            dS[[at[name] for name in road]] = (smoothed + incoherence * diagonal_part(smoothed)
                                                if k_inc is not None else smoothed)
         special = {"ln_road": S_road}
         if k_inc is not None:
-            special["ln_incoherence"] = incoherence * self._diagonal(rank)
+            special["ln_incoherence"] = incoherence * diagonal_part(rank)
         for name, value in special.items():
             if name in at:
                 dS[at[name]] = value
@@ -390,13 +403,6 @@ class HalfCarSpectrum:
         S = self.spectrum(theta, derivatives=False, smooth=False)[0]
         return S if self.grid_step == 1 else map_bins(interpolation(self.n_ext, self.grid_step), S)
 
-    @staticmethod
-    def _diagonal(m: np.ndarray) -> np.ndarray:
-        """The diagonal part of stacked 2x2 matrices (..., 2, 2)."""
-        out = np.zeros_like(m)
-        out[..., 0, 0], out[..., 1, 1] = m[..., 0, 0], m[..., 1, 1]
-        return out
-
     def _outer_sum(self, a: list[np.ndarray], b: list[np.ndarray], weight: np.ndarray) -> np.ndarray:
         """Σ_c weight a_c b_cᴴ folded over the aliases: (n_eval, 2, 2) on the evaluation grid."""
         out = sum(np.einsum("af,bf->fab", ac, bc.conj()) for ac, bc in zip(a, b, strict=True))
@@ -407,7 +413,3 @@ class HalfCarSpectrum:
         out = m * weight[:, None, None]
         return out.reshape(*m.shape[:-3], self.n_alias, self.n_eval, 2, 2).sum(axis=-4)
 
-    @staticmethod
-    def _hermitian_part(m: np.ndarray) -> np.ndarray:
-        """m + mᴴ per frequency (and row)."""
-        return m + m.conj().swapaxes(-1, -2)

@@ -7,6 +7,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from rozyn_estimator.method.likelihood.fitcheck import UNSTEADY
 from rozyn_estimator.tools.trial.run import TrialResult
 from rozyn_estimator.tools.trial.spec import TrialSpec
 from rozyn_estimator.tools.trial.summary import summarise
@@ -81,6 +82,10 @@ def _checks(spec: TrialSpec, results: Sequence[TrialResult]) -> list[str]:
             and r.estimate.refinement.model_fit is not None]
     lines = []
     model = f"the {spec.car.name}-car model"
+    unchecked = sum(f.verdict == UNSTEADY for f in fits)
+    fits = [f for f in fits if f.verdict != UNSTEADY]
+    if unchecked:
+        lines.append(f"model check: not computed on {unchecked} window(s) holding stops or pulling away")
     if len(fits) == 1:
         lines.append(f"model check: {model} {'fits' if fits[0].ok else 'does not fit'} the spectra "
                      f"(p = {fits[0].p_value:.2g})")

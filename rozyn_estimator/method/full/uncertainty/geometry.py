@@ -20,6 +20,7 @@ centreline), and θ's scale of ``l_f`` stays the model's: neither moves.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
@@ -33,8 +34,11 @@ _BAR = {"track_front_m": (20, "anti_roll_stiffness_front_nmprad"),
 
 
 def geometry_derivatives(model: FullCarSpectrum, theta: np.ndarray, keys: Sequence[str]) -> np.ndarray:
-    """dS (G, nodes, k, k) at θ per metre of each of ``keys`` (of :data:`GEOMETRY`)."""
+    """dS (G, nodes, k, k) at θ per metre of each of ``keys`` (of :data:`GEOMETRY`); on a varying
+    drive (the road's mixture over the window's delays and speeds) by central differences."""
     v = model.vehicle
+    if model.mixture is not None:
+        return np.array([_difference(model, theta, key) for key in keys])
     inv_d, H, inputs, _, d_motion = model.body_motion(theta)
     sensing = model.sensing_at(theta)
     B = model.body_map
@@ -71,3 +75,13 @@ def geometry_derivatives(model: FullCarSpectrum, theta: np.ndarray, keys: Sequen
         out[[g for g, *_ in bars]] += model.corner_derivatives(theta, directions)
     return out
 
+
+def _difference(model: FullCarSpectrum, theta: np.ndarray, key: str, step: float = 1e-5) -> np.ndarray:
+    """dS/d(key) at θ by a central difference of the model (a varying drive's mixture moves with
+    the wheelbase's delays and the track's coherence at each of its speeds)."""
+    ends = []
+    for sign in (1.0, -1.0):
+        moved = dataclasses.replace(model.vehicle, **{key: getattr(model.vehicle, key) + sign * step})
+        with model.assuming(moved):
+            ends.append(model.node_spectrum(theta, derivatives=False)[0])
+    return (ends[0] - ends[1]) / (2.0 * step)

@@ -1,0 +1,94 @@
+"""Real drives: the likelihood's model of a varying speed and stops, and the online windows of
+driving with the estimate held at stops."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rozyn_estimator.method import METHODS, estimate
+from rozyn_estimator.method.likelihood.road_input import DRIVING_MPS, road_mixture, travel_delays
+from rozyn_estimator.online import NS, OnlineConfig, OnlineEstimator
+from rozyn_estimator.tolerances import Tolerances
+from rozyn_estimator.vehicle import Vehicle
+from sim_node.road import RoadSpec
+from sim_node.simulation import SimConfig, Simulation
+
+EXACT = Vehicle(tolerances=Tolerances.none())
+TRUTH = np.array([1000.0, 2000.0, 1.2])
+GAUSSIAN = RoadSpec(amplitudes="gaussian")
+
+
+def test_the_wheelbase_delay_is_the_time_to_the_rear_wheels_place():
+    fs, L = 100.0, 2.8
+    t = np.arange(3000) / fs
+    assert travel_delays(L, np.full(t.size, 14.0), fs) == pytest.approx(np.full(t.size, L / 14.0))
+    v0, a = 3.0, 1.5  # pulling away: L/v is 30 % off here
+    tau = travel_delays(L, v0 + a * t, fs)
+    s = v0 * t + 0.5 * a * t * t
+    exact = t - (-v0 + np.sqrt(v0 * v0 + 2 * a * (s - L))) / a  # when the front wheel was L behind
+    late = s > L
+    np.testing.assert_allclose(tau[late], exact[late], atol=1e-4)
+
+
+def test_the_mixture_at_one_speed_is_the_wheelbase_delay_and_standing_carries_no_road():
+    omega = 2 * np.pi * np.linspace(0.5, 15.0, 50)
+    share, phi = road_mixture(omega, 2.8, np.r_[np.full(500, 20.0), np.zeros(500)], None, 0.0, 100.0)
+    np.testing.assert_allclose(share, 1.0)
+    np.testing.assert_allclose(phi, np.exp(-1j * omega * 2.8 / 20.0), atol=0.02)  # its 64 bins
+    crawl = np.full(1000, 0.5 * DRIVING_MPS)
+    crawl[:10] = 20.0
+    share, _ = road_mixture(omega, 2.8, crawl, None, 5.0, 100.0)
+    np.testing.assert_allclose(share[omega / (2 * np.pi) > 110.0], 0.0)  # the road ended above 5 cycles/m
+    assert np.all(share > 0)
+
+
+@pytest.mark.parametrize("cycle", ["udds", "hwfet"])
+def test_a_varying_drive_is_estimated_within_its_std(cycle):
+    """Every 120 s window of two drives (from the fourth minute, every 100 s) has a refined
+    estimate; pooled, the errors are covered by the published std as the docs measure it on
+    180 urban and 80 highway windows (coverage 91-100 %, |mean z| below 0.7). Rozyn's stage
+    alone refuses such windows."""
+    z = []
+    for seed in (1, 2):
+        sim = Simulation(SimConfig(vehicle=EXACT, drive_cycle_file=cycle, road=GAUSSIAN,
+                                   seed=seed, noise_std_mps2=0.025))
+        block = sim.run(sim.config.drive_cycle.duration_s)
+        for start in range(180, int(block.t_s[-1]) - 120, 100):
+            part = slice(start * 100, (start + 120) * 100)
+            accel, speed = block.accel_mps2[part], block.speed_mps[part]
+            est = estimate(accel, 100.0, EXACT, METHODS["likelihood"], speed_mps=speed)
+            assert est.ok and est.stage == "likelihood", (seed, start, est.reason)
+            z.append((est.params - TRUTH) / est.std)
+    z = np.array(z)
+    assert np.all(np.mean(np.abs(z) < 1.96, axis=0) >= 0.75), z
+    assert np.all(np.abs(z.mean(axis=0)) < 1.0), z.mean(axis=0)
+    rozyn = estimate(accel, 100.0, EXACT, METHODS["rozyn"], speed_mps=speed)
+    assert not rozyn.ok and "assumes a constant speed" in rozyn.reason
+
+
+def test_a_drive_with_a_stop_holds_the_estimate_and_standing_does_not_fill_the_window(tmp_path):
+    """150 s at 54 km/h, a 60 s stop, 150 s more: at the stop the last estimate is republished,
+    marked held; after it the window reaches back over the stop, so estimates go on at once."""
+    path = tmp_path / "stop.csv"
+    path.write_text("time_s,speed_kmh\n0,54\n150,54\n160,0\n220,0\n230,54\n400,54\n")
+    sim = Simulation(SimConfig(vehicle=EXACT, drive_cycle_file=str(path), road=GAUSSIAN,
+                               seed=4, noise_std_mps2=0.025))
+    block = sim.run(380.0)
+    stamps = np.round(block.t_s * NS).astype(np.int64)
+    est = OnlineEstimator(EXACT, OnlineConfig(window_s=100.0, update_period_s=10.0), METHODS["likelihood"])
+    updates = []
+    for k in range(stamps.size):
+        if k % 10 == 0:
+            est.add_speed(int(stamps[k]), float(block.speed_mps[k]))
+        jobs = [*est.add(0, int(stamps[k]), float(block.accel_mps2[k, 0])),
+                *est.add(1, int(stamps[k]), float(block.accel_mps2[k, 1]))]
+        updates += [est.compute(job) for job in jobs]
+    at = {round(u.stamp_ns / NS): u for u in updates}
+    held = [u for t, u in at.items() if 165 <= t <= 215]
+    assert held and all(u.held and u.published for u in held)
+    assert all(np.array_equal(u.params, at[150].params) for u in held)  # the estimate before the stop
+    after = [u for t, u in at.items() if t >= 235]
+    assert after and all(u.published and not u.held for u in after), [u.message for u in after]
+    z = np.array([(u.params - TRUTH) / np.sqrt(np.diag(u.covariance)) for u in after])
+    assert np.all(np.median(np.abs(z), axis=0) < 2.0), z  # windows over the stop overlap: a robust summary
