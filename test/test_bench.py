@@ -13,7 +13,8 @@ KEYS = ("sim_100s_at_100hz_ms", "road_generation_ms", "update_120s_window_ms",
         "study_trials_per_second", "study_refined_trials_per_second", "refined_warm_per_rozyn_update",
         "refined_cold_per_rozyn_update", "budget_overhead_pct",
         "glitch_per_clean_update", "full_refined_update_cold_ms", "full_refined_update_warm_ms",
-        "full_refined_warm_per_half", "full_refined_cold_per_half", "peak_rss_mb", "goals")
+        "full_refined_warm_per_half", "full_refined_cold_per_half", "urban_update_cold_ms",
+        "urban_update_warm_ms", "urban_cold_per_constant", "urban_warm_per_constant", "peak_rss_mb", "goals")
 
 
 def test_bench_reports_the_refined_studys_rate_next_to_the_others(monkeypatch):
@@ -37,6 +38,8 @@ def test_bench_reports_the_refined_studys_rate_next_to_the_others(monkeypatch):
     # the full car's refined update per the half car's (issue 13: <= 3x), timed in turn with it
     assert out["full_refined_update_cold_ms"] == 3.0 and out["full_refined_cold_per_half"] == 2.0
     assert out["full_refined_warm_per_half"] == 2.0 and out["goals"]["full_refined_warm_per_half"] == 3.0
+    # an urban window's update per the constant-speed one's, timed in turn with it (goal <= 1.5x)
+    assert out["urban_warm_per_constant"] == 2.0 and out["goals"]["urban_warm_per_constant"] == 1.5
 
 
 def test_paired_timings_run_the_functions_in_turn_and_report_each_ones_median(monkeypatch):
