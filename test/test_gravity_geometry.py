@@ -39,6 +39,19 @@ def _relative(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sqrt(np.mean((a - b) ** 2) / np.mean(b**2)))
 
 
+def _assert_plant_matches(car: PlanarCar, road, points_m: np.ndarray, samples_at, plant, vehicle,
+                          plain) -> None:
+    """The plant of ``vehicle`` (its heights given) matches the multibody integration of ``car``
+    over 6 s of ``road``; the plant of ``plain`` (no heights) is far off (the check can fail)."""
+    t = np.arange(0.0, 6.0, DT_S)
+    truth = integrate(car, road, t, points_m)
+    samples = samples_at(t)
+    err = _relative(plant(vehicle, DT_S).run(samples), truth)
+    err_without = _relative(plant(plain, DT_S).run(samples), truth)
+    assert err < 1.5e-3, err  # measured 5e-5 (half), 5e-4 (full); without μh² 4e-3
+    assert err_without > 10 * err, (err, err_without)
+
+
 def test_half_car_plant_matches_a_multibody_integration() -> None:
     v = Vehicle(**HEIGHTS)
     lf, lr, L = v.cog_from_front_axle_m, v.cog_from_rear_axle_m, v.wheelbase_m
@@ -57,14 +70,9 @@ def test_half_car_plant_matches_a_multibody_integration() -> None:
         (rf, df), (rr, dr) = _road(t), _road(t - delay_s)
         return np.array([rf, rr]), np.array([df, dr])
 
-    t = np.arange(0.0, 6.0, DT_S)
-    truth = integrate(car, road, t, np.array([lf, -lr]))
-    samples = np.column_stack([_road(t)[0], _road(t - delay_s)[0]])
-    with_geometry = HalfCarPlant(v, DT_S).run(samples)
-    without = HalfCarPlant(Vehicle(), DT_S).run(samples)
-    err, err_without = _relative(with_geometry, truth), _relative(without, truth)
-    assert err < 1.5e-3, err  # measured 5e-5 (half), 5e-4 (full); without μh² 4e-3
-    assert err_without > 10 * err, (err, err_without)
+    _assert_plant_matches(car, road, np.array([lf, -lr]),
+                          lambda t: np.column_stack([_road(t)[0], _road(t - delay_s)[0]]),
+                          HalfCarPlant, v, Vehicle())
 
 
 def test_full_car_plant_matches_a_multibody_integration_in_roll() -> None:
@@ -85,14 +93,8 @@ def test_full_car_plant_matches_a_multibody_integration_in_roll() -> None:
         r, d = _road(t)
         return sign * r, sign * d
 
-    t = np.arange(0.0, 6.0, DT_S)
-    truth = integrate(car, road, t, np.array(v.sensor_y_m))
-    samples = _road(t)[0][:, None] * sign
-    with_geometry = FullCarPlant(v, DT_S).run(samples)
-    without = FullCarPlant(FullVehicle(), DT_S).run(samples)
-    err, err_without = _relative(with_geometry, truth), _relative(without, truth)
-    assert err < 1.5e-3, err  # measured 5e-5 (half), 5e-4 (full); without μh² 4e-3
-    assert err_without > 10 * err, (err, err_without)
+    _assert_plant_matches(car, road, np.array(v.sensor_y_m), lambda t: _road(t)[0][:, None] * sign,
+                          FullCarPlant, v, FullVehicle())
 
 
 def test_heights_come_in_pairs() -> None:

@@ -37,7 +37,11 @@ def constant_speed_only(speed: float | np.ndarray | None) -> str | None:
             "likelihood refinement models a varying drive)")
 
 
-def varying_drive(reason: str, speed: float | np.ndarray | None) -> str:
-    """Why a varying drive's window has no estimate when its refinement failed."""
+def varying_drive(reason: str, speed: float | np.ndarray | None) -> str | None:
+    """Why a window whose refinement failed (``reason``) has no estimate: its speed varies by more
+    than :data:`ROZYN_MAX_SPEED_VARIATION`, so Rozyn's stage may not stand in (None: it may)."""
+    spread = speed_spread(speed)
+    if spread <= ROZYN_MAX_SPEED_VARIATION:
+        return None
     return (f"likelihood refinement failed: {reason}; Rozyn's estimate is not published on a drive whose "
-            f"speed varies by {speed_spread(speed) * 100:.0f} % (its method assumes a constant speed)")
+            f"speed varies by {spread * 100:.0f} % (its method assumes a constant speed)")

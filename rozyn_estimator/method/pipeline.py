@@ -30,13 +30,7 @@ import numpy as np
 from rozyn_estimator.method.budget import Budget, Calibration, rozyn_contributions
 from rozyn_estimator.method.config import PARAM_NAMES, PipelineConfig
 from rozyn_estimator.method.correlation import correlation_sums
-from rozyn_estimator.method.drive import (
-    ROZYN_MAX_SPEED_VARIATION,
-    constant_speed_only,
-    speed_spread,
-    varying_drive,
-    window_speed,
-)
+from rozyn_estimator.method.drive import constant_speed_only, varying_drive, window_speed
 from rozyn_estimator.method.fit import axle_shapes, characteristic_matrix, fit_inertia
 from rozyn_estimator.method.glitches import GlitchError, gate_glitches
 from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
@@ -274,8 +268,8 @@ def _refined(
             n_samples=n, elapsed_ms=elapsed, notes=notes + ref.notes, stage="likelihood",
             rozyn=rozyn, refinement=ref, guard_std=guard_std,
         )
-    if rozyn.ok and speed_spread(speed) > ROZYN_MAX_SPEED_VARIATION:
-        return _failed(varying_drive(ref.reason, speed), n, started, rozyn=rozyn, refinement=ref)
+    if rozyn.ok and (why := varying_drive(ref.reason, speed)):
+        return _failed(why, n, started, rozyn=rozyn, refinement=ref)
     if rozyn.ok:
         return dataclasses.replace(
             _with_budget(rozyn, vehicle, cfg), elapsed_ms=elapsed, rozyn=rozyn, refinement=ref,

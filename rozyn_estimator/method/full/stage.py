@@ -32,13 +32,7 @@ import numpy as np
 
 from rozyn_estimator.method.config import PipelineConfig
 from rozyn_estimator.method.correlation import correlation_sums
-from rozyn_estimator.method.drive import (
-    ROZYN_MAX_SPEED_VARIATION,
-    constant_speed_only,
-    speed_spread,
-    varying_drive,
-    window_speed,
-)
+from rozyn_estimator.method.drive import constant_speed_only, varying_drive, window_speed
 from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES, fit_full_inertia
 from rozyn_estimator.method.full.refine import FullRefinement, refine_full
 from rozyn_estimator.method.full.uncertainty.budget import FullBudget, full_contributions
@@ -148,7 +142,7 @@ def _rozyn_stage(y: np.ndarray, fs_hz: float, vehicle: FullVehicle, cfg: Pipelin
     """Rozyn's stage on the checked, demeaned window ``y`` (:func:`checked_window`)."""
     n = int(y.shape[0])
     try:
-        params, cov, modes, notes = _identify(y, fs_hz, vehicle, cfg, _mean_speed(speed_mps), index)
+        params, cov, modes, notes = _identify(y, fs_hz, vehicle, cfg, window_speed(speed_mps)[0], index)
     except (InputError, IdentificationError, np.linalg.LinAlgError) as exc:
         return FullEstimate(status="failed", reason=str(exc), n_samples=n, sensors=tuple(sensors),
                             elapsed_ms=(time.perf_counter() - started) * 1e3)
@@ -191,19 +185,14 @@ def _refined(
                             notes=check + ref.notes + quick.notes,
                             budget=budget, stage="likelihood", rozyn=quick, refinement=ref, glitches=gated,
                             elapsed_ms=(time.perf_counter() - started) * 1e3)
-    if speed_spread(speed_mps) > ROZYN_MAX_SPEED_VARIATION:
-        return FullEstimate(status="failed", reason=varying_drive(ref.reason, speed_mps),
+    if why := varying_drive(ref.reason, speed_mps):
+        return FullEstimate(status="failed", reason=why,
                             sensors=tuple(sensors), n_samples=quick.n_samples, rozyn=quick, refinement=ref,
                             glitches=gated, elapsed_ms=(time.perf_counter() - started) * 1e3)
     rozyn = _rozyn_stage(y, fs_hz, vehicle, rozyn_cfg, speed_mps, sensors, index, time.perf_counter())
     note = f"likelihood refinement failed ({ref.reason}); publishing the Rozyn estimate"
     return dataclasses.replace(rozyn, rozyn=quick, refinement=ref, notes=(note, *rozyn.notes), glitches=gated,
                                elapsed_ms=(time.perf_counter() - started) * 1e3)
-
-
-def _mean_speed(speed_mps: float | np.ndarray | None) -> float | None:
-    """The speed the window's road is seen at (None: unknown)."""
-    return window_speed(speed_mps)[0]
 
 
 def _sensor_indices(sensors: Sequence[str]) -> tuple[int, ...]:
