@@ -1,16 +1,22 @@
 """Drive cycles: a speed trace the simulated vehicle follows instead of a constant speed.
 
 A cycle is a CSV of time and speed (``time_s`` and one of ``speed_kmh``, ``speed_mps``,
-``speed_mph``; lines starting ``#`` are comments): the speed is linear between its rows, the
-distance its exact integral, and past its end the cycle starts again (a 30-minute urban drive
-is the urban cycle repeated). Shipped, by name (``sim_node/drive_cycles/``, each citing its
-public source): ``udds`` (US EPA urban, stop-and-go), ``hwfet`` (US EPA highway) and ``wltc3b``
-(the UN's worldwide cycle, class 3b).
+``speed_mph``; lines starting ``#`` are comments), and past its end the cycle starts again (a
+30-minute urban drive is the urban cycle repeated). The vehicle follows the rows through a
+moving average over :data:`SMOOTHING_S`: a cycle's rows are targets a second apart, and
+joining them by straight lines would step the acceleration every second (an unbounded jerk)
+and pitch the body harder than a driver does; averaged, the acceleration is continuous and
+the jerk at most a row's change of acceleration per second. Speed, distance and acceleration
+are exact for that average (the rows joined linearly, then averaged).
+
+Shipped, by name (``sim_node/drive_cycles/``, each citing its public source): ``udds`` (US EPA
+urban, stop-and-go), ``hwfet`` (US EPA highway) and ``wltc3b`` (the UN's worldwide cycle, class 3b).
 """
 
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import math
 from dataclasses import dataclass
@@ -25,6 +31,7 @@ SHIPPED = ("udds", "hwfet", "wltc3b")
 _UNITS = {"speed_mps": 1.0, "speed_kmh": 1.0 / 3.6, "speed_mph": 0.44704}
 MAX_CYCLE_SPEED_MPS = 150.0  # the estimator drops faster speeds as corrupt (online.config)
 _MAX_BYTES = 16 << 20
+SMOOTHING_S = 1.0  # the driver's moving average over the cycle's rows (see the module's docstring)
 
 
 @dataclass(frozen=True)
@@ -48,19 +55,57 @@ class DriveCycle:
         return np.concatenate(([0.0], np.cumsum(np.diff(self.time_s) * 0.5 * (self.speed_mps[1:]
                                                                               + self.speed_mps[:-1]))))
 
+    def _linear_distance(self, t: np.ndarray) -> np.ndarray:
+        """The distance [m] from t = 0 of the rows joined linearly (exact: quadratic between rows)."""
+        laps, local = np.divmod(t, self.duration_s)
+        k, tau = self._piece(local)
+        within = self.speed_mps[k] * tau + 0.5 * self._slopes[k] * tau * tau
+        return laps * self.length_m + self._cumulative()[k] + within
+
+    def _distance_integral(self, t: np.ndarray) -> np.ndarray:
+        """``∫_0^t`` of :meth:`_linear_distance` [m s]: cubic between rows, laps in closed form."""
+        laps, local = np.divmod(t, self.duration_s)
+        k, tau = self._piece(local)
+        d0, dt = self._cumulative(), np.diff(self.time_s)
+        v, a = self.speed_mps[:-1], self._slopes
+        pieces = np.concatenate(([0.0], np.cumsum(d0[:-1] * dt + v * dt**2 / 2 + a * dt**3 / 6)))
+        within = d0[k] * tau + self.speed_mps[k] * tau**2 / 2 + self._slopes[k] * tau**3 / 6
+        one_lap, length = pieces[-1], self.length_m
+        # laps before: each a lap's integral plus the distance of the laps before it
+        return (laps * one_lap + length * self.duration_s * laps * (laps - 1) / 2
+                + pieces[k] + within + laps * length * local)
+
+    def _piece(self, local: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        k = np.clip(np.searchsorted(self.time_s, local, side="right") - 1, 0, self.time_s.size - 2)
+        return k, local - self.time_s[k]
+
+    @property
+    def _slopes(self) -> np.ndarray:
+        return np.diff(self.speed_mps) / np.diff(self.time_s)
+
     def speed_at(self, t_s: np.ndarray) -> np.ndarray:
-        """The speed [m/s] at times ``t_s`` (the cycle repeated, before 0 too)."""
-        return np.interp(np.mod(np.asarray(t_s, dtype=float), self.duration_s), self.time_s, self.speed_mps)
+        """The speed [m/s] at times ``t_s`` (the cycle repeated, before 0 too; averaged over
+        :data:`SMOOTHING_S`)."""
+        t = np.asarray(t_s, dtype=float)
+        return (self._linear_distance(t) - self._linear_distance(t - SMOOTHING_S)) / SMOOTHING_S
+
+    def acceleration_at(self, t_s: np.ndarray) -> np.ndarray:
+        """The longitudinal acceleration [m/s²] at times ``t_s``: the speed's exact derivative."""
+        t = np.asarray(t_s, dtype=float)
+        linear = np.interp(np.mod(t, self.duration_s), self.time_s, self.speed_mps)
+        before = np.interp(np.mod(t - SMOOTHING_S, self.duration_s), self.time_s, self.speed_mps)
+        return (linear - before) / SMOOTHING_S
 
     def distance_at(self, t_s: np.ndarray) -> np.ndarray:
-        """The distance [m] driven from t = 0 (negative before it): exact for the linear speed."""
+        """The distance [m] driven from t = 0 (negative before it): the exact integral of
+        :meth:`speed_at`."""
         t = np.asarray(t_s, dtype=float)
-        laps, local = np.divmod(t, self.duration_s)
-        k = np.clip(np.searchsorted(self.time_s, local, side="right") - 1, 0, self.time_s.size - 2)
-        tau = local - self.time_s[k]
-        slope = np.diff(self.speed_mps)[k] / np.diff(self.time_s)[k]
-        within = self.speed_mps[k] * tau + 0.5 * slope * tau * tau
-        return laps * self.length_m + self._cumulative()[k] + within
+        moving = self._distance_integral(t) - self._distance_integral(t - SMOOTHING_S)
+        return (moving - self._zero) / SMOOTHING_S
+
+    @functools.cached_property
+    def _zero(self) -> float:
+        return float(self._distance_integral(np.array(0.0)) - self._distance_integral(np.array(-SMOOTHING_S)))
 
     def standing_share(self, threshold_mps: float = 0.5) -> float:
         """The share of the cycle's time below ``threshold_mps`` (sampled every 0.1 s)."""

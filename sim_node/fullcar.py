@@ -23,8 +23,8 @@ with ``a = [1, -1, 0, 0]`` (front) or ``[0, 0, 1, -1]`` (rear), and, where the v
 its heights, the weight through the geometry on pitch and roll (:mod:`rozyn_estimator.gravity`:
 ``-m g h`` on their stiffness, ``μ h²`` on their inertia). The road under the four
 tyres enters as displacement (``k_t``) and velocity (``c_t``), and the model is
-discretised exactly (first-order hold) and propagated in modal blocks by
-:mod:`sim_node.modal`, as the half car is.
+discretised exactly (first-order hold) and propagated in modal blocks by :mod:`sim_node.modal`,
+as the half car is. The matrices are :mod:`rozyn_estimator.body_model`'s (the estimator's too).
 
 The departures (:mod:`sim_node.departures`) as the half car's: a nonlinear suspension at
 each corner (the anti-roll bars stay linear) and delayed sensors, run by
@@ -37,69 +37,21 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from rozyn_estimator.gravity import gravity_height_m, rotation_inertia_kgm2, rotation_stiffness_nmprad
+from rozyn_estimator.body_model import FULL_CORNERS as N_TYRES
+from rozyn_estimator.body_model import FULL_DOF as N_DOF
+from rozyn_estimator.body_model import FULL_HEAVE as HEAVE
+from rozyn_estimator.body_model import FULL_PITCH as PITCH
+from rozyn_estimator.body_model import FULL_ROLL as ROLL
+from rozyn_estimator.body_model import full_car_body_rows as body_rows
+from rozyn_estimator.body_model import full_car_model as second_order_model
+from rozyn_estimator.body_model import full_car_sensor_points as sensor_points
+from rozyn_estimator.body_model import full_car_suspension_rows as suspension_rows
 from rozyn_estimator.vehicle_full import FullVehicle
 from sim_node.departures import SuspensionLaw
-from sim_node.modal import SecondOrderModel, StateSpace, natural_modes_of, state_space_of, static_state_of
+from sim_node.modal import StateSpace, natural_modes_of, state_space_of, static_state_of
 from sim_node.plant import SuspendedPlant
 
-N_DOF = 7
 N_STATE = 2 * N_DOF
-N_TYRES = 4
-HEAVE, PITCH, ROLL = 4, 5, 6  # indices of the body's coordinates in q
-
-
-def suspension_rows(v: FullVehicle) -> np.ndarray:
-    """(4, 7) map ``G`` from ``q`` to the corners' extensions ``e = z(corner) - x_t`` (FL, FR, RL, RR)."""
-    g = np.zeros((N_TYRES, N_DOF))
-    g[:, :N_TYRES] = -np.eye(N_TYRES)
-    g[:, HEAVE:] = body_rows(v, np.column_stack([v.corner_x_m, v.corner_y_m]))[:, HEAVE:]
-    return g
-
-
-def body_rows(v: FullVehicle, points_m: np.ndarray) -> np.ndarray:
-    """(k, 7) map from ``q`` to the body's vertical motion at points ``(x, y)`` (k, 2) [m]:
-    ``x_s + (lf - x) phi + (y - y_cog) theta``."""
-    p = np.atleast_2d(np.asarray(points_m, dtype=float))
-    if p.ndim != 2 or p.shape[1] != 2:
-        raise ValueError(f"points_m must have shape (k, 2) of (x, y), got {np.shape(points_m)}")
-    rows = np.zeros((p.shape[0], N_DOF))
-    rows[:, HEAVE] = 1.0
-    rows[:, PITCH] = v.cog_from_front_axle_m - p[:, 0]
-    rows[:, ROLL] = p[:, 1] - v.cog_lateral_m
-    return rows
-
-
-def sensor_points(v: FullVehicle) -> np.ndarray:
-    """(4, 2) the accelerometers' ``(x, y)`` (FL, FR, RL, RR) [m]."""
-    return np.column_stack([v.sensor_x_m, v.sensor_y_m])
-
-
-def second_order_model(v: FullVehicle) -> SecondOrderModel:
-    """Mass, damping and stiffness matrices (see the module's docstring), tyres as inputs."""
-    g = suspension_rows(v)
-    bars = np.zeros((N_TYRES, N_TYRES))  # the bars' springs between the corners' extensions
-    for rows, bar_nmprad, track in ((slice(0, 2), v.anti_roll_stiffness_front_nmprad, v.track_front_m),
-                                    (slice(2, 4), v.anti_roll_stiffness_rear_nmprad, v.track_rear_m)):
-        bars[rows, rows] = bar_nmprad / track**2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
-
-    def corners(suspension: tuple[float, ...], tyre: tuple[float, ...], extra: np.ndarray) -> np.ndarray:
-        out = g.T @ (np.diag(suspension) + extra) @ g
-        out[:N_TYRES, :N_TYRES] += np.diag(tyre)
-        return out
-
-    stiffness = corners(v.suspension_stiffness_npm, v.tyre_stiffness_npm, bars)
-    damping = corners(v.suspension_damping_nspm, v.tyre_damping_nspm, np.zeros((N_TYRES, N_TYRES)))
-    mass = np.diag([*v.unsprung_mass_kg, v.sprung_mass_kg, v.pitch_inertia_kgm2, v.roll_inertia_kgm2])
-    h = gravity_height_m(v)  # the weight through the geometry, in pitch and in roll alike
-    for k in (PITCH, ROLL):
-        stiffness[k, k] += rotation_stiffness_nmprad(v.sprung_mass_kg, h)
-        mass[k, k] += rotation_inertia_kgm2(v.sprung_mass_kg, h, sum(v.unsprung_mass_kg))[0]
-    tyre_k = np.zeros((N_DOF, N_TYRES))
-    tyre_k[:N_TYRES] = np.diag(v.tyre_stiffness_npm)
-    tyre_c = np.zeros((N_DOF, N_TYRES))
-    tyre_c[:N_TYRES] = np.diag(v.tyre_damping_nspm)
-    return SecondOrderModel(mass, damping, stiffness, tyre_k, tyre_c)
 
 
 def state_space(v: FullVehicle, points_m: np.ndarray | None = None) -> StateSpace:
@@ -152,5 +104,6 @@ def natural_modes(v: FullVehicle) -> tuple[np.ndarray, np.ndarray]:
     return natural_modes_of(state_space(v))
 
 
-__all__ = ["N_DOF", "N_STATE", "N_TYRES", "FullCarPlant", "body_rows", "free_decay", "natural_modes",
-           "second_order_model", "sensor_points", "state_space", "static_state", "suspension_rows"]
+__all__ = ["HEAVE", "N_DOF", "N_STATE", "N_TYRES", "PITCH", "ROLL", "FullCarPlant", "body_rows", "free_decay",
+           "natural_modes", "second_order_model", "sensor_points", "state_space", "static_state",
+           "suspension_rows"]

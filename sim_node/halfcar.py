@@ -6,6 +6,7 @@ Body points at the axles move ``x_sf = x_s + lf*phi`` and ``x_sr = x_s - lr*phi`
 (eqs 3-8, 3-9; the thesis prints ``l_f`` in 3-9 and in the rear damping term of 3-6,
 both typos corrected here).
 
+The matrices are :mod:`rozyn_estimator.body_model`'s (the estimator's too).
 The road enters through the tyres as displacement and velocity; the model is discretised
 exactly (first-order hold) and propagated block by block in modal coordinates by
 :mod:`sim_node.modal`, so a long run equals the concatenation of blocks.
@@ -18,74 +19,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from rozyn_estimator.gravity import gravity_height_m, rotation_inertia_kgm2, rotation_stiffness_nmprad
+from rozyn_estimator.body_model import HALF_DOF as N_DOF
+from rozyn_estimator.body_model import half_car_model as second_order_model
+from rozyn_estimator.body_model import half_car_sensor_rows as sensor_rows
+from rozyn_estimator.body_model import half_car_suspension_rows as suspension_rows
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.departures import SuspensionLaw
-from sim_node.modal import SecondOrderModel, StateSpace, natural_modes_of, state_space_of, static_state_of
+from sim_node.modal import StateSpace, natural_modes_of, state_space_of, static_state_of
 from sim_node.plant import SuspendedPlant
 
-N_DOF = 4
 N_STATE = 2 * N_DOF
-
-
-def second_order_model(v: Vehicle) -> SecondOrderModel:
-    """Mass, damping and stiffness matrices of eqs 3-4 to 3-7 (typos corrected), with the weight
-    through the geometry on pitch where the vehicle gives its heights (:mod:`rozyn_estimator.gravity`)."""
-    lf, lr = v.cog_from_front_axle_m, v.cog_from_rear_axle_m
-
-    def suspension_matrix(kf: float, kr: float, tf: float, tr: float) -> np.ndarray:
-        # Same pattern for stiffness (eq 3-5) and damping (eq 3-6): suspension element
-        # between wheel and body point, tyre element between road and wheel.
-        return np.array(
-            [
-                [tf + kf, 0.0, -kf, -lf * kf],
-                [0.0, tr + kr, -kr, lr * kr],
-                [-kf, -kr, kf + kr, lf * kf - lr * kr],
-                [-lf * kf, lr * kr, lf * kf - lr * kr, lf**2 * kf + lr**2 * kr],
-            ]
-        )
-
-    stiffness = suspension_matrix(
-        v.suspension_stiffness_front_npm,
-        v.suspension_stiffness_rear_npm,
-        v.tyre_stiffness_front_npm,
-        v.tyre_stiffness_rear_npm,
-    )
-    damping = suspension_matrix(
-        v.suspension_damping_front_nspm,
-        v.suspension_damping_rear_nspm,
-        v.tyre_damping_front_nspm,
-        v.tyre_damping_rear_nspm,
-    )
-    mass = np.diag(
-        [v.unsprung_mass_front_kg, v.unsprung_mass_rear_kg, v.sprung_mass_kg, v.pitch_inertia_kgm2]
-    )
-    h = gravity_height_m(v)  # the weight through the geometry (0 where the heights are not given)
-    stiffness[3, 3] += rotation_stiffness_nmprad(v.sprung_mass_kg, h)
-    unsprung_kg = v.unsprung_mass_front_kg + v.unsprung_mass_rear_kg
-    mass[3, 3] += rotation_inertia_kgm2(v.sprung_mass_kg, h, unsprung_kg)[0]
-    tyre_k = np.zeros((N_DOF, 2))
-    tyre_k[0, 0], tyre_k[1, 1] = v.tyre_stiffness_front_npm, v.tyre_stiffness_rear_npm
-    tyre_c = np.zeros((N_DOF, 2))
-    tyre_c[0, 0], tyre_c[1, 1] = v.tyre_damping_front_nspm, v.tyre_damping_rear_nspm
-    return SecondOrderModel(mass, damping, stiffness, tyre_k, tyre_c)
-
-
-def sensor_rows(v: Vehicle) -> np.ndarray:
-    """(2, 4) map from ``q`` to the body's vertical motion at the two sensors."""
-    lf = v.cog_from_front_axle_m
-    rows = np.zeros((2, N_DOF))
-    for i, x in enumerate(v.sensor_x_m):
-        rows[i, 2] = 1.0
-        rows[i, 3] = lf - x
-    return rows
-
-
-def suspension_rows(v: Vehicle) -> np.ndarray:
-    """(2, 4) map ``G`` from ``q`` to the corners' extensions ``e = x_s,axle - x_t`` (eqs 3-8,
-    3-9): the suspension part of eq 3-5 is ``G^T diag(k_s) G``, of eq 3-6 ``G^T diag(c_s) G``."""
-    lf, lr = v.cog_from_front_axle_m, v.cog_from_rear_axle_m
-    return np.array([[-1.0, 0.0, 1.0, lf], [0.0, -1.0, 1.0, -lr]])
 
 
 def state_space(v: Vehicle) -> StateSpace:
@@ -133,3 +76,7 @@ def free_decay(vehicle: Vehicle, x0: np.ndarray, dt_s: float, n: int) -> np.ndar
 def natural_modes(v: Vehicle) -> tuple[np.ndarray, np.ndarray]:
     """(frequency [Hz], damping ratio) of the four modes, sorted by frequency."""
     return natural_modes_of(state_space(v))
+
+
+__all__ = ["N_DOF", "N_STATE", "HalfCarPlant", "free_decay", "natural_modes", "second_order_model",
+           "sensor_rows", "state_space", "static_state", "suspension_rows"]

@@ -19,20 +19,7 @@ import numpy as np
 from scipy.linalg import expm, solve
 from scipy.signal import cont2discrete, lfilter
 
-
-@dataclass(frozen=True)
-class SecondOrderModel:
-    """``M q'' + C q' + K q = Kt u + Ct u'`` with ``u`` the road displacement under each tyre [m]."""
-
-    mass: np.ndarray  # (dof, dof), diagonal
-    damping: np.ndarray  # (dof, dof)
-    stiffness: np.ndarray  # (dof, dof)
-    tyre_stiffness: np.ndarray  # (dof, tyres) road displacement -> generalised force
-    tyre_damping: np.ndarray  # (dof, tyres) road velocity -> generalised force
-
-    @property
-    def dof(self) -> int:
-        return int(self.mass.shape[0])
+from rozyn_estimator.body_model import SecondOrderModel
 
 
 @dataclass(frozen=True)

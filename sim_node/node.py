@@ -175,12 +175,12 @@ class SimNode(Node):
         msg.linear_acceleration_covariance = [var, 0.0, 0.0, 0.0, var, 0.0, 0.0, 0.0, var]
         return msg
 
-    def _publish_truth(self) -> None:
-        """The plant's values, as the estimator publishes its estimates (the full car's roll
-        inertia in ``ixx``, its lateral CoG in ``com.y``)."""
-        v = self.config.plant_vehicle
+    def _publish_truth(self, at_s: float = 0.0) -> None:
+        """The plant's values from ``at_s`` on, as the estimator publishes its estimates (the full
+        car's roll inertia in ``ixx``, its lateral CoG in ``com.y``)."""
+        v = self._truth = self.sim.truth
         msg = InertiaStamped()
-        msg.header.stamp = _time(self._epoch_ns)
+        msg.header.stamp = _time(self._epoch_ns + round(at_s * NS))
         msg.header.frame_id = self.options.truth_frame_id
         msg.inertia.m = v.sprung_mass_kg
         msg.inertia.iyy = v.pitch_inertia_kgm2
@@ -225,6 +225,11 @@ class SimNode(Node):
                 self._finish()
             return
         block = self.sim.next_block(n)
+        if self.sim.truth is not self._truth:  # the load changed in this block
+            before, at_s = self._truth.sprung_mass_kg, self.config.load_change_at_s
+            self._publish_truth(at_s)
+            self.get_logger().info(f"load changed at the stop at t = {at_s:g} s: m {before:g} -> "
+                                   f"{self._truth.sprung_mass_kg:g} kg")
         stamps = [self._epoch_ns + round(t * NS) for t in block.t_s]
         if self._pub_clock is not None:
             self._pub_clock.publish(ClockMsg(clock=_time(stamps[-1])))

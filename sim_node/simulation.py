@@ -4,7 +4,9 @@
 the plant, the distance travelled, the sensors' filters and the noise stream carry over,
 so a run cut into blocks equals the same run made at once and memory stays bounded
 however long it runs. ``SimConfig.departures`` makes the plant and the sensors depart
-from the estimator's model (:mod:`sim_node.departures`); by default they do not.
+from the estimator's model (:mod:`sim_node.departures`); by default they do not. Where the
+speed varies and the vehicle gives its CoG's height, accelerating and braking pitch the body
+(:mod:`sim_node.load_transfer`).
 
 ``SimConfig.model = "full"`` runs the 7-DOF full car (:mod:`sim_node.fullcar`) of
 ``full_vehicle`` over two road tracks (:mod:`sim_node.tracks`, coherence
@@ -27,10 +29,12 @@ from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.parameters import check, param
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import CORNERS, MODELS, FullVehicle
-from sim_node import fullcar
+from sim_node import fullcar, halfcar
 from sim_node.departures import Departures
 from sim_node.drive_cycle import DriveCycle, load_drive_cycle
 from sim_node.halfcar import N_DOF, N_STATE, HalfCarPlant, static_state
+from sim_node.load_change import STANDING_MPS, with_point_load
+from sim_node.load_transfer import LoadTransfer
 from sim_node.road import Road, RoadSpec
 from sim_node.sensors import GRAVITY_MPS2, Accelerometers
 from sim_node.tracks import COHERENCES, RoadTracks
@@ -61,6 +65,13 @@ class SimConfig:
     drive_cycle_file: str = param("", "drive cycle the vehicle follows instead of speed_kmh: a shipped one "
                                   "(udds, hwfet, wltc3b) or a CSV of time_s and speed_kmh (or speed_mps, "
                                   "speed_mph), repeated; empty: constant speed", read_only=True)
+    load_change_kg: float = param(0.0, "a point load put in (negative: taken out) at load_change_at_s, "
+                                  "on the centreline at the CoG's height; 0: none", unit="kg", low=-1e5,
+                                  high=1e5, read_only=True)
+    load_change_x_m: float = param(0.0, "where that load sits behind the centre of gravity (negative: "
+                                   "ahead of it)", unit="m", low=-10.0, high=10.0, read_only=True)
+    load_change_at_s: float = param(0.0, "when the load changes: the vehicle must stand then (a stop of the "
+                                    "drive cycle)", unit="s", low=0.0, high=1e9, read_only=True)
     rate_hz: float = param(100.0, "accelerometer rate", unit="Hz", low=1.0, high=100_000.0, read_only=True)
     # 1 kHz: the plant holds the road linear over a step; at 500 Hz that hold's images, aliased
     # into the sensors' band, were what the estimator's model check saw on quiet sensors
@@ -106,6 +117,24 @@ class SimConfig:
             self.drive_cycle  # noqa: B018 (loaded and checked now, not at the first step)
         except ConfigError as exc:
             raise ConfigError(f"drive_cycle_file: {exc}") from None
+        if self.load_change_kg:
+            self._check_load_change()
+
+    def _check_load_change(self) -> None:
+        """ConfigError unless the load changes while the vehicle stands, to a vehicle."""
+        cycle, at = self.drive_cycle, self.load_change_at_s
+        if cycle is None:
+            raise ConfigError("load_change_kg: a load changes at a stop, and at a constant speed the vehicle "
+                              "never stops: give a drive_cycle_file")
+        speed = float(cycle.speed_at(np.array([at]))[0])
+        if speed >= STANDING_MPS:
+            t = np.arange(0.0, cycle.duration_s, 0.5)
+            stops = t[(cycle.speed_at(t) < STANDING_MPS) & (cycle.speed_at(t - 0.5) >= STANDING_MPS)]
+            near = ", ".join(f"{x:g}" for x in stops[np.argsort(np.abs(stops - at % cycle.duration_s))[:3]])
+            raise ConfigError(f"load_change_at_s: the vehicle drives at {speed:.1f} m/s at t = {at:g} s; a "
+                              f"load changes at a stop (the cycle {cycle.name} stops at t = {near} s, among "
+                              "others)")
+        with_point_load(self.plant_vehicle, self.load_change_kg, self.load_change_x_m)
 
     @property
     def speed_mps(self) -> float:
@@ -170,23 +199,55 @@ class Simulation:
             self.road = Road(cfg.road, cfg.seed, period_m=period)
         self._noise = np.random.default_rng([cfg.seed, 2])
         self._step = -round(cfg.settle_s / self._dt) if cfg.road.kind != "flat" else 0
+        self.truth = vehicle  # the simulated vehicle now (a load change replaces it)
+        self._change_step = round(cfg.load_change_at_s / self._dt) if cfg.load_change_kg else None
         u0 = self._road_at(np.array([self._step]))[0]
-        x0 = self._initial_state(u0)
+        self._build_plants(vehicle, self._initial_state(u0), u0)
+        bias = (0.0,) * len(CORNERS) if isinstance(vehicle, FullVehicle) else cfg.bias_mps2
+        self.sensors = Accelerometers(cfg.departures, 1.0 / self._dt, bias, cfg.include_gravity,
+                                      full_car=isinstance(vehicle, FullVehicle))
+        if self._step < 0:
+            self._advance(-self._step)
+
+    def _build_plants(self, vehicle: Vehicle | FullVehicle, x0: np.ndarray, u0: np.ndarray) -> None:
+        """The plant of ``vehicle`` from state ``x0`` on the road ``u0``, and its load transfer."""
+        cfg = self.config
         self.plant: HalfCarPlant | fullcar.FullCarPlant
         if isinstance(vehicle, FullVehicle):
             self.plant = fullcar.FullCarPlant(vehicle, self._dt, x0=x0, u0=u0,
                                               suspension=cfg.departures.suspension(vehicle),
                                               delays_s=cfg.departures.corner_delays_s)
-            bias: tuple[float, ...] = (0.0,) * len(CORNERS)
         else:
-            self.plant = HalfCarPlant(cfg.vehicle, self._dt, x0=x0, u0=u0,
-                                      suspension=cfg.departures.suspension(cfg.vehicle),
+            self.plant = HalfCarPlant(vehicle, self._dt, x0=x0, u0=u0,
+                                      suspension=cfg.departures.suspension(vehicle),
                                       delays_s=cfg.departures.delays_s)
-            bias = cfg.bias_mps2
-        self.sensors = Accelerometers(cfg.departures, 1.0 / self._dt, bias, cfg.include_gravity,
-                                      full_car=isinstance(vehicle, FullVehicle))
-        if self._step < 0:
-            self._advance(-self._step)
+        self._transfer = self._load_transfer(vehicle)
+
+    def _change_load(self) -> None:
+        """The load changes now (the vehicle stands): the loaded body at rest on the road here."""
+        cfg = self.config
+        self.truth = with_point_load(self.truth, cfg.load_change_kg, cfg.load_change_x_m)
+        u0 = self._road_at(np.array([self._step]))[0]
+        rest = fullcar.static_state(self.truth, u0) if isinstance(self.truth, FullVehicle) else \
+            static_state(self.truth, u0)
+        self._build_plants(self.truth, rest, u0)
+
+    def _load_transfer(self, vehicle: Vehicle | FullVehicle) -> LoadTransfer | None:
+        """The body's pitch from accelerating and braking (:mod:`sim_node.load_transfer`) where the
+        vehicle gives its CoG's height and the speed varies; else None."""
+        cfg = self.config
+        if vehicle.cog_height_m <= 0.0 or (cfg.drive_cycle is None and cfg.speed_variation == 0.0):
+            return None
+        accel0 = float(self.acceleration_at(np.array(self._step * self._dt)))
+        if isinstance(vehicle, FullVehicle):
+            model, rows, pitch = fullcar.second_order_model(vehicle), fullcar.body_rows(
+                vehicle, fullcar.sensor_points(vehicle)), fullcar.PITCH
+            corners, delays = fullcar.suspension_rows(vehicle), cfg.departures.corner_delays_s
+        else:
+            model, rows, pitch = halfcar.second_order_model(vehicle), halfcar.sensor_rows(vehicle), 3
+            corners, delays = halfcar.suspension_rows(vehicle), cfg.departures.delays_s
+        return LoadTransfer(model, rows, corners, pitch, vehicle.sprung_mass_kg, vehicle.cog_height_m,
+                            self._dt, accel0, delays)
 
     def _initial_state(self, u0: np.ndarray) -> np.ndarray:
         """The plant's start: ``initial_state``, the thesis' free decay on a flat road, else at rest."""
@@ -226,6 +287,15 @@ class Simulation:
         w = 2.0 * np.pi / cfg.speed_period_s
         return cfg.speed_mps * (1.0 + cfg.speed_variation * np.sin(w * t))
 
+    def acceleration_at(self, t_s: np.ndarray) -> np.ndarray:
+        """The longitudinal acceleration [m/s²] at ``t_s``: the speed's derivative."""
+        cfg = self.config
+        if cfg.drive_cycle is not None:
+            return cfg.drive_cycle.acceleration_at(t_s)
+        t = np.asarray(t_s, dtype=float) + cfg.settle_s
+        w = 2.0 * np.pi / cfg.speed_period_s
+        return cfg.speed_mps * cfg.speed_variation * w * np.cos(w * t)
+
     def _road_at(self, steps: np.ndarray) -> np.ndarray:
         """(n, 2) front/rear road height at plant steps; the full car's (n, 4) FL, FR, RL, RR: the
         rear wheels in the front ones' tracks, a wheelbase behind."""
@@ -237,9 +307,22 @@ class Simulation:
         )
 
     def _advance(self, n_steps: int) -> np.ndarray:
-        """The body's acceleration at the sensors over the next plant steps, low-passed."""
+        """The body's acceleration at the sensors over the next plant steps, low-passed (the
+        load changing on its step)."""
+        at, end = self._change_step, self._step + n_steps
+        if at is not None and self._step <= at < end:
+            before = self._advance_plant(at - self._step)
+            self._change_load()
+            self._change_step = None
+            return np.vstack([before, self._advance_plant(end - at)])
+        return self._advance_plant(n_steps)
+
+    def _advance_plant(self, n_steps: int) -> np.ndarray:
         steps = self._step + np.arange(n_steps)
-        accel = self.sensors.lowpass(self.plant.run(self._road_at(steps)))
+        body = self.plant.run(self._road_at(steps))
+        if self._transfer is not None:
+            body = body + self._transfer.run(self.acceleration_at(steps * self._dt))
+        accel = self.sensors.lowpass(body)
         self._step += n_steps
         return accel
 

@@ -19,7 +19,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PKG = "rozyn_estimator"
 SHARED = {f"{PKG}", f"{PKG}.errors", f"{PKG}.vehicle", f"{PKG}.vehicle_full", f"{PKG}.parameters",
-          f"{PKG}.tolerances", f"{PKG}.gravity"}
+          f"{PKG}.tolerances", f"{PKG}.gravity", f"{PKG}.body_model"}
 ROS_PACKAGES = {"rclpy", "builtin_interfaces", "diagnostic_msgs", "geometry_msgs", "sensor_msgs", "std_msgs",
                 "nav_msgs", "rcl_interfaces", "rosgraph_msgs"}
 # sub-package -> the project modules it may import (besides its own) and third-party ROS
@@ -34,7 +34,7 @@ RULES: dict[str, tuple[set[str], bool]] = {
 }
 ROS_FREE_SIM = {"sim_node.halfcar", "sim_node.road", "sim_node.simulation", "sim_node.departures",
                 "sim_node.sensors", "sim_node.fixed_point", "sim_node.modal",
-                "sim_node.fullcar", "sim_node.tracks"}
+                "sim_node.fullcar", "sim_node.tracks", "sim_node.load_transfer", "sim_node.drive_cycle"}
 
 
 def _modules() -> dict[str, Path]:

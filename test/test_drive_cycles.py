@@ -27,7 +27,20 @@ def test_the_distance_is_the_speeds_integral_and_the_cycle_repeats():
     t = np.linspace(-50.0, 3000.0, 300_001)
     d = cycle.distance_at(t)
     assert np.max(np.abs(np.gradient(d, t) - cycle.speed_at(t))) < 0.02  # m/s, the slope at the kinks
-    np.testing.assert_allclose(cycle.distance_at(t + cycle.duration_s) - d, cycle.length_m, rtol=1e-12)
+    np.testing.assert_allclose(cycle.distance_at(t + cycle.duration_s) - d, cycle.length_m, rtol=1e-10)
+
+
+def test_the_driver_follows_the_rows_with_a_continuous_acceleration_and_a_bounded_jerk():
+    cycle = load_drive_cycle("udds")
+    t = np.linspace(-50.0, 3000.0, 600_001)
+    a = cycle.acceleration_at(t)
+    assert np.max(np.abs(np.gradient(cycle.speed_at(t), t) - a)) < 0.01  # m/s², the speed's derivative
+    jerk = np.abs(np.diff(a) / np.diff(t))
+    rows = np.abs(np.diff(np.diff(cycle.speed_mps) / np.diff(cycle.time_s)))
+    assert jerk.max() <= rows.max() * (1 + 1e-9)  # a row's change of acceleration per second, at most
+    assert np.max(np.abs(np.diff(a))) < 0.01  # continuous: no step between samples 5 ms apart
+    # the moving average passes through the cycle's steady stretches: 20 s of idling, then moving
+    assert cycle.speed_at(np.array([10.0]))[0] == 0.0 and cycle.speed_at(np.array([40.0]))[0] > 5.0
 
 
 @pytest.mark.parametrize(("text", "words"), [

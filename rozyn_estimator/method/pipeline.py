@@ -35,6 +35,7 @@ from rozyn_estimator.method.fit import axle_shapes, characteristic_matrix, fit_i
 from rozyn_estimator.method.glitches import GlitchError, gate_glitches
 from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
 from rozyn_estimator.method.likelihood import Refinement, refine
+from rozyn_estimator.method.load_transfer import carries_load_transfer, fit_without_load_transfer
 from rozyn_estimator.method.variance import jackknife_covariance
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import FullVehicle
@@ -157,6 +158,12 @@ def estimate(
         return _failed(why, int(y.shape[0]), started)
     if cfg.refine == "none":
         est = _with_budget(_rozyn_stage(y, fs_hz, vehicle, cfg, speed, started), vehicle, cfg)
+    elif carries_load_transfer(vehicle, profile):
+        def fit(window: np.ndarray, warm: Estimate | None) -> Estimate:
+            return _refined(window, fs_hz, vehicle, cfg, speed, profile, warm or warm_start, started)
+
+        est = fit_without_load_transfer(y, fs_hz, vehicle, np.asarray(profile), _warm_params(warm_start), fit,
+                                        lambda e: e.params if e.ok else None)
     else:
         est = _refined(y, fs_hz, vehicle, cfg, speed, profile, warm_start, started)
     return dataclasses.replace(est, glitches=gated) if any(gated) else est
@@ -278,6 +285,13 @@ def _refined(
         )
     return _failed(f"{rozyn.reason}; likelihood refinement failed: {ref.reason}",
                    n, started, rozyn=rozyn, refinement=ref)
+
+
+def _warm_params(warm_start: Estimate | np.ndarray | None) -> np.ndarray | None:
+    """The previous window's (m, I, lf), if any."""
+    if isinstance(warm_start, Estimate):
+        return warm_start.params if warm_start.ok else None
+    return None if warm_start is None else np.asarray(warm_start, dtype=float)
 
 
 def _warm(warm_start: Estimate | np.ndarray | None) -> Refinement | np.ndarray | None:

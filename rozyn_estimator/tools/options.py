@@ -22,12 +22,35 @@ def add_run_options(p: argparse.ArgumentParser, roads: Sequence[str], amplitudes
                    help="Laplace road: variance of the section gamma variable (default: 1.0)")
     p.add_argument("--waviness", type=float, default=2.0, metavar="W", help="ISO waviness w (default: 2)")
     p.add_argument("--speed-kmh", type=float, default=100.0, help="vehicle speed (default: 100)")
+    add_drive_options(p)
+    p.add_argument("--duration-s", type=float, default=100.0, help="measurement time (default: 100)")
+    p.add_argument("--rate-hz", type=float, default=100.0, help="accelerometer rate (default: 100)")
+
+
+def add_drive_options(p: argparse.ArgumentParser) -> None:
+    """A drive cycle and a load change at one of its stops."""
     p.add_argument("--drive-cycle", default="", metavar="NAME|FILE.csv",
                    help="follow a drive cycle instead of --speed-kmh: udds (urban stop-and-go), hwfet "
                         "(highway), wltc3b, or a CSV of time_s and speed_kmh (docs/simulator.md); the "
                         "cycle repeats for longer runs (default: none)")
-    p.add_argument("--duration-s", type=float, default=100.0, help="measurement time (default: 100)")
-    p.add_argument("--rate-hz", type=float, default=100.0, help="accelerometer rate (default: 100)")
+    p.add_argument("--load-change-kg", type=float, default=0.0, metavar="KG",
+                   help="put a point load in at a stop of the drive cycle (negative: take it out); the "
+                        "truth switches with it (default: 0, none)")
+    p.add_argument("--load-change-x-m", type=float, default=0.0, metavar="X",
+                   help="where that load sits behind the centre of gravity [m] (default: 0)")
+    p.add_argument("--load-change-at-s", type=float, default=0.0, metavar="T",
+                   help="when the load changes [s]: the vehicle must stand then (default: 0)")
+
+
+def load_change_values(args: argparse.Namespace) -> dict[str, Any]:
+    """The load change options as the simulator's parameters."""
+    return {"load_change_kg": args.load_change_kg, "load_change_x_m": args.load_change_x_m,
+            "load_change_at_s": args.load_change_at_s}
+
+
+def drive_label(args: argparse.Namespace) -> str:
+    """How the vehicle drives, for a title: the drive cycle or the speed."""
+    return f"the drive cycle {args.drive_cycle}" if args.drive_cycle else f"{args.speed_kmh:g} km/h"
 
 
 def add_vehicle_option(p: argparse.ArgumentParser) -> None:

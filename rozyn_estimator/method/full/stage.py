@@ -37,6 +37,7 @@ from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES, fit_full_inertia
 from rozyn_estimator.method.full.refine import FullRefinement, refine_full
 from rozyn_estimator.method.full.uncertainty.budget import FullBudget, full_contributions
 from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
+from rozyn_estimator.method.load_transfer import carries_load_transfer, fit_without_load_transfer
 from rozyn_estimator.method.pipeline import InputError, checked_window, lag_range
 from rozyn_estimator.method.variance import jackknife_covariance
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
@@ -169,11 +170,28 @@ def _refined(
         return FullEstimate(status="failed", reason=str(exc), sensors=tuple(sensors),
                             n_samples=int(np.shape(accel_mps2)[0]) if np.ndim(accel_mps2) else 0,
                             elapsed_ms=(time.perf_counter() - started) * 1e3)
+    warm_ref = warm.refinement if warm is not None else None
+
+    def fit(window: np.ndarray, again: FullEstimate | None) -> FullEstimate:
+        return _refine_window(window, gated, fs_hz, vehicle, cfg, speed_mps, sensors, index,
+                              again.refinement if again is not None else warm_ref, started)
+
+    if carries_load_transfer(vehicle, speed_mps):
+        start = warm.params if warm is not None and warm.ok else None
+        return fit_without_load_transfer(y, fs_hz, vehicle, np.asarray(speed_mps), start, fit,
+                                         lambda e: e.params if e.ok else None, columns=index)
+    return fit(y, None)
+
+
+def _refine_window(y: np.ndarray, gated: tuple[int, ...], fs_hz: float, vehicle: FullVehicle,
+                   cfg: PipelineConfig, speed_mps: float | np.ndarray | None, sensors: Sequence[str],
+                   index: tuple[int, ...], warm: FullRefinement | None, started: float) -> FullEstimate:
+    """:func:`_refined`'s stages on the checked window ``y``."""
     rozyn_cfg = dataclasses.replace(cfg, refine="none")
     quick_cfg = dataclasses.replace(rozyn_cfg, variance="none")
     quick = _rozyn_stage(y, fs_hz, vehicle, quick_cfg, speed_mps, sensors, index, time.perf_counter())
     ref = refine_full(y, fs_hz, vehicle, index, quick.params, 0.0 if speed_mps is None else speed_mps,
-                      cfg.likelihood, warm=warm.refinement if warm is not None else None)
+                      cfg.likelihood, warm=warm)
     if ref.ok and ref.params is not None and ref.covariance is not None:
         calibrated = () if ref.calibration is None else ref.calibration.calibrations
         budget = FullBudget(ref.covariance, ref.contributions, calibrated) if vehicle.tolerances.any else None
@@ -193,6 +211,8 @@ def _refined(
     note = f"likelihood refinement failed ({ref.reason}); publishing the Rozyn estimate"
     return dataclasses.replace(rozyn, rozyn=quick, refinement=ref, notes=(note, *rozyn.notes), glitches=gated,
                                elapsed_ms=(time.perf_counter() - started) * 1e3)
+
+
 
 
 def _sensor_indices(sensors: Sequence[str]) -> tuple[int, ...]:

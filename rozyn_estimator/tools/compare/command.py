@@ -92,7 +92,8 @@ def base_spec(args: argparse.Namespace) -> TrialSpec:
         duration_s=args.duration_s, rate_hz=args.rate_hz, noise_fraction=args.noise,
         bias_mps2=tuple(args.bias_mps2), vehicle=vehicle, periodic=not args.endless_road,
         departures=Departures(**departure_values(args)), **vehicle_error_values(args),
-        speed_error=args.speed_error,
+        speed_error=args.speed_error, load_change_kg=args.load_change_kg,
+        load_change_x_m=args.load_change_x_m, load_change_at_s=args.load_change_at_s,
     )
 
 

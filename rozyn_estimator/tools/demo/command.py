@@ -44,8 +44,11 @@ from rozyn_estimator.errors import BagError, ConfigError
 from rozyn_estimator.tools.demo.output import Seen, print_new, summary, write_outputs
 from rozyn_estimator.tools.options import (
     add_departure_options,
+    add_drive_options,
     add_vehicle_error_options,
     departure_values,
+    drive_label,
+    load_change_values,
     vehicle_error_values,
 )
 from sim_node.sensors import MEMS_NOISE_MPS2
@@ -109,6 +112,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="road amplitudes (default: gaussian, a true random road)",
     )
     p.add_argument("--speed-kmh", type=float, default=100.0, help="vehicle speed (default: 100)")
+    add_drive_options(p)
     p.add_argument("--noise-std-mps2", type=float, default=MEMS_NOISE_MPS2,
                    help=f"white sensor noise [m/s²] (default: {MEMS_NOISE_MPS2:g}, a consumer MEMS "
                         "accelerometer's; 0: exact sensors)")
@@ -160,7 +164,8 @@ def node_values(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, Any
     estimator = {"speed_topic": "sim/speed", "window_s": args.window_s, "qos_depth": QUEUE_DEPTH, **told}
     sim = {"time_mode": "sim", "real_time_factor": args.real_time_factor, "duration_s": args.duration_s,
            "wait_for_subscribers": True, "road.kind": args.road, "road.amplitudes": args.amplitudes,
-           "speed_kmh": args.speed_kmh, "seed": args.seed, "noise_std_mps2": args.noise_std_mps2, **vehicle}
+           "speed_kmh": args.speed_kmh, "seed": args.seed, "noise_std_mps2": args.noise_std_mps2,
+           "drive_cycle_file": args.drive_cycle, **load_change_values(args), **vehicle}
     sim |= {f"departures.{name}": value for name, value in departure_values(args).items()}
     EstimatorConfig.from_parameters(estimator)
     build(SimNodeOptions(), sim)
@@ -273,7 +278,7 @@ def run(args: argparse.Namespace) -> int:
         executor.add_node(node)
     print(
         f"rozyn demo: {'the full car, ' if seen.layout.full else ''}{args.road} road ({args.amplitudes} "
-        f"amplitudes), {args.speed_kmh:g} km/h, "
+        f"amplitudes), {drive_label(args)}, "
         f"{args.duration_s:g} s of sim time at {args.real_time_factor:g}x, window {args.window_s:g} s "
         f"(ROS_DOMAIN_ID {domain})",
         flush=True,

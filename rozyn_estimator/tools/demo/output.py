@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from rozyn_estimator.online import Layout
+from rozyn_estimator.tools.options import drive_label
 from rozyn_estimator.tools.replay.outputs import inertia_values
 
 NS = 1_000_000_000
@@ -105,6 +106,6 @@ def write_outputs(out_dir: Path, updates: Sequence[Any], seen: Seen, args: argpa
     png = plot_estimates(
         out_dir / "updates.csv", out_dir / PLOT_NAME,
         truth=None if seen.truth is None else seen.values(seen.truth),
-        title=f"rozyn demo: {car}{args.road} road ({args.amplitudes}), {args.speed_kmh:g} km/h",
+        title=f"rozyn demo: {car}{args.road} road ({args.amplitudes}), {drive_label(args)}",
     )
     print(f"plot: {png}")

@@ -82,7 +82,8 @@ def trial_spec(args: argparse.Namespace) -> TrialSpec:
         noise_std_mps2=noise_std(args),
         noise_fraction=args.noise_fraction, vehicle=car.vehicle(args.vehicle),
         method=args.method or "likelihood", departures=Departures(**departure_values(args)),
-        **vehicle_error_values(args), speed_error=args.speed_error,
+        **vehicle_error_values(args), speed_error=args.speed_error, load_change_kg=args.load_change_kg,
+        load_change_x_m=args.load_change_x_m, load_change_at_s=args.load_change_at_s,
     )
 
 

@@ -20,6 +20,7 @@ from rozyn_estimator.tools.cars import ERROR_FIELDS, AnyVehicle, Car, car_of
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import FullVehicle
 from sim_node.departures import Departures
+from sim_node.load_change import with_point_load
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig
 
@@ -62,6 +63,10 @@ class TrialSpec:
     speed_period_s: float = param(60.0, "period of the speed change", unit="s")
     drive_cycle: str = param("", "drive cycle the vehicle follows instead of speed_kmh (a shipped name or a "
                              "CSV file; sim_node.drive_cycle)")
+    load_change_kg: float = param(0.0, "a point load put in at a stop of the drive cycle "
+                                  "(sim_node.load_change)", unit="kg")
+    load_change_x_m: float = param(0.0, "where that load sits behind the CoG", unit="m")
+    load_change_at_s: float = param(0.0, "when the load changes (the vehicle standing)", unit="s")
     speed_error: float = param(0.0, "the estimator is told the speed times (1 + this): a wrong speed topic",
                                low=-1.0, open_low=True, high=100.0)
     periodic: bool = param(True, "road period = the record's distance (thesis eq 4-7); false: endless road")
@@ -116,6 +121,8 @@ class TrialSpec:
             speed_variation=self.speed_variation, speed_period_s=self.speed_period_s,
             rate_hz=self.rate_hz, noise_std_mps2=self.noise_std_mps2, bias_mps2=self.bias_mps2,
             duration_s=self.duration_s if self.periodic else 0.0, departures=self.departures,
+            load_change_kg=self.load_change_kg, load_change_x_m=self.load_change_x_m,
+            load_change_at_s=self.load_change_at_s,
         )
 
     def pipeline_config(self, method: str | None = None) -> PipelineConfig:
@@ -145,5 +152,7 @@ class TrialSpec:
 
     @property
     def truth(self) -> np.ndarray:
-        """(k,) the true parameters, in the car's order."""
+        """(k,) the true parameters, in the car's order, at the run's end (after a load change in it)."""
+        if self.load_change_kg and self.load_change_at_s < self.duration_s:
+            return self.car.truth(with_point_load(self.vehicle, self.load_change_kg, self.load_change_x_m))
         return self.car.truth(self.vehicle)
