@@ -38,6 +38,7 @@ GROUPS = {
     "wheelbase": "wheelbase", "sensor_front_offset": "sensor positions",
     "sensor_rear_offset": "sensor positions", "sensor_gain": "sensor gains",
     "sensor_time_offset": "sensor timing", "cog_height": "heights", "wheel_centre_height": "heights",
+    "drive_model": "varying drive's model",
 }
 UNITS = ("kg", "kg m2", "m")
 _REL_STEP = 1e-5

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rozyn_estimator.online.channel import Channel
+from rozyn_estimator.online.records import Job
 
 
 @dataclass(frozen=True)
@@ -58,3 +59,17 @@ def trigger_of(due_ns: int, before: Sequence[int | None], channels: np.ndarray, 
         idx = np.flatnonzero(channels == c)
         reached.append(int(idx[np.searchsorted(stamps[idx], due_ns)]))
     return max(reached)
+
+
+def as_received(job: Job, before: list[int | None], channels: np.ndarray, stamps: np.ndarray,
+                order: np.ndarray, speed: SpeedSamples | None) -> tuple[Job, int]:
+    """A job of a clean batch as the node would have snapshot it: (the job without the speeds that
+    arrived after the sample that made it due, that sample's position)."""
+    trigger = trigger_of(job.due_ns, before, channels, stamps)
+    if speed is not None:
+        late = (speed.order > order[trigger]) & (speed.stamps_ns <= job.due_ns)
+        if np.any(late):
+            t, v = job.speed
+            keep = ~np.isin(t, speed.stamps_ns[late])
+            job = Job(job.due_ns, job.samples, (t[keep], v[keep]), job.epoch, job.speed_source)
+    return job, trigger

@@ -17,17 +17,16 @@ four corners (:class:`~rozyn_estimator.online.records.Layout`). Updates fall due
 :meth:`OnlineEstimator.report` gives one diagnostics message.
 
 Bad input is dropped and counted, never raised: non-finite values or speeds, duplicate stamps,
-stamps older than the channel's last (out of order: not also counted missing). A gap
-longer than ``max_gap_s`` or a stamp more than ``jump_back_s`` older than the last (bag
-loop, sim restart) resets the window, and the next report says so. A channel holds at
-most about three windows of samples (two and an update period behind its newest, trimmed
-once it holds a window more), also while the other sensor is silent and no update falls
-due. :meth:`OnlineEstimator.compute` never raises: an unexpected failure is an ERROR
-update, reported until a good one follows.
+stamps older than the channel's last (out of order: not also counted missing). A gap longer
+than ``max_gap_s`` or a stamp more than ``jump_back_s`` older than the last (bag loop, sim
+restart) resets the window, and the next report says so. A channel holds at most about three
+windows of samples (trimmed once it holds a window more), also while the other sensor is
+silent. :meth:`OnlineEstimator.compute` never raises: an unexpected failure is an ERROR
+update, reported until a good one follows. The windows' estimates are fused while the load
+stays, and a load change at a stop restarts them (:mod:`~rozyn_estimator.online.fusion`).
 
-The state is shared between the feeding thread, the worker that computes and the
-diagnostics timer: every public method takes the instance's lock (the pipeline itself
-runs outside it).
+The state is shared between the feeding thread, the worker that computes and the diagnostics
+timer: every public method takes the instance's lock (the pipeline runs outside it).
 
 Example:
     >>> import numpy as np
@@ -51,12 +50,13 @@ import numpy as np
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import Estimate, PipelineConfig
 from rozyn_estimator.method.full import FullEstimate
-from rozyn_estimator.online.batch import SpeedSamples, clean_batch, trigger_of
+from rozyn_estimator.online.batch import SpeedSamples, as_received, clean_batch
 from rozyn_estimator.online.channel import Channel
 from rozyn_estimator.online.config import OnlineConfig, speed_problem
 from rozyn_estimator.online.driving import driving_start
 from rozyn_estimator.online.estimator_config import EstimatorConfig
-from rozyn_estimator.online.records import ERROR, NS, WARN, Health, Job, Layout, Level, Update, layout_of
+from rozyn_estimator.online.fusion import Fusion, fuse_update, trimmed
+from rozyn_estimator.online.records import ERROR, NS, OK, WARN, Health, Job, Layout, Level, Update, layout_of
 from rozyn_estimator.online.status import health_values, status
 from rozyn_estimator.online.update import compute_update
 from rozyn_estimator.vehicle import Vehicle
@@ -108,6 +108,7 @@ class OnlineEstimator:
         self._epoch = 0  # the window's generation, one more at each reset
         self._events: deque[tuple[Level, str]] = deque(maxlen=_MAX_EVENTS)  # not yet reported
         self._last_update: Update | None = None
+        self._fusion = Fusion()  # the windows fused since the last load change
         self._reported_losses = 0  # drops and missing samples at the last report
         self._warm: Estimate | FullEstimate | None = None  # the last published estimate
 
@@ -146,6 +147,7 @@ class OnlineEstimator:
             raise ConfigError("the vehicle model (half or full car) cannot change while running")
         with self._lock:
             self._vehicle, self._config, self._pipeline = vehicle, config, pipeline
+            self._fusion.reset()  # another vehicle file: the windows so far measured under the old one
 
     # ------------------------------------------------------------- counters
     @property
@@ -238,7 +240,7 @@ class OnlineEstimator:
             if speed is not None:
                 for t, v in zip(speed.stamps_ns.tolist(), speed.values, strict=True):
                     self._add_speed(t, v)
-            return [self._as_received(job, before, channels, stamps_ns, order, speed)
+            return [as_received(job, before, channels, stamps_ns, order, speed)
                     for job in self._take_due()]
 
     def reset(self, reason: str) -> None:
@@ -248,6 +250,7 @@ class OnlineEstimator:
                 ch.clear()
             self._next_due_ns = None
             self._warm = None
+            self._fusion.reset()
             self._resets += 1
             self._epoch += 1
             self._events.append((WARN, f"window reset: {reason}"))
@@ -306,18 +309,6 @@ class OnlineEstimator:
                 out += [(job, i) for job in self._take_due()]
         return out
 
-    def _as_received(self, job: Job, before: list[int | None], channels: np.ndarray, stamps: np.ndarray,
-                     order: np.ndarray, speed: SpeedSamples | None) -> tuple[Job, int]:
-        """A job of a clean batch as the node would have snapshot it: the trigger, no late speeds."""
-        trigger = trigger_of(job.due_ns, before, channels, stamps)
-        if speed is not None:
-            late = (speed.order > order[trigger]) & (speed.stamps_ns <= job.due_ns)
-            if np.any(late):
-                t, v = job.speed
-                keep = ~np.isin(t, speed.stamps_ns[late])
-                job = Job(job.due_ns, job.samples, (t[keep], v[keep]), job.epoch, job.speed_source)
-        return job, trigger
-
     # ------------------------------------------------------------- schedule
     def _take_due(self) -> Sequence[Job]:
         """Snapshot every update that has fallen due, oldest first; then forget what no
@@ -374,6 +365,9 @@ class OnlineEstimator:
         with self._lock:
             current = job.epoch == self._epoch
             settings = (self._config, self._vehicle, self._pipeline, self._warm if current else None)
+            cfg = self._config
+            cut = self._fusion.test_cut(job, cfg.min_window_fill * cfg.window_s, cfg.driving_speed_mps)
+        job = job if cut is None or not current else trimmed(job, cut)  # wholly after a stop: its test
         try:
             update = compute_update(job, self.names, *settings, self._layout)
         except Exception as exc:  # the one guard: node and replay both compute here
@@ -382,8 +376,12 @@ class OnlineEstimator:
             update = Update(job.due_ns, ERROR, f"update failed (internal error, please report): {text}")
         with self._lock:
             if current and job.epoch == self._epoch:  # no reset meanwhile
-                if update.published:
-                    self._warm = update.estimate  # the next window's refinement starts here
+                if update.published and not update.held:
+                    self._warm = update.estimate  # the next window's refinement starts here (its own)
+                update, change = fuse_update(self._fusion, update, job, self._config.driving_speed_mps,
+                                             self._vehicle.wheelbase_m, probe=cut is not None)
+                if change:
+                    self._events.append((OK, change))
                 self._last_update = update
         return update
 

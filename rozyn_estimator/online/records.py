@@ -120,6 +120,8 @@ class Update:
     fs_hz: float = 0.0
     speed_mps: float | None = None
     held: bool = False  # at a stop: the last estimate, republished
+    fused_windows: int = 0  # disjoint windows the estimate fuses since the last load change (0: none)
+    load_changes: int = 0  # load changes found at stops so far
 
     @property
     def published(self) -> bool:
@@ -163,6 +165,9 @@ def update_values(update: Update, layout: Layout = HALF_LAYOUT) -> dict[str, str
         out["speed_mps"] = f"{update.speed_mps:.3f}"
     if update.held:
         out["held"] = "true"
+    if update.fused_windows:
+        out["fused_windows"] = str(update.fused_windows)
+        out["load_changes"] = str(update.load_changes)
     est = update.estimate
     if est is None:
         return out

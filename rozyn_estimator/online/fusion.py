@@ -1,0 +1,271 @@
+"""Information accumulates while the load stays; a load change at a stop is found and restarts it.
+
+Each update estimates one window. While the load is the same, the windows since the last change
+all measure the same vehicle, so the published estimate fuses them: the information-weighted
+mean of their estimates, ``P = Σ S_i⁻¹``, ``θ = P⁻¹ Σ S_i⁻¹ θ_i``, with ``S_i`` a window's
+*statistical* covariance (its budget's; the exact vehicle's whole covariance). Overlapping
+windows share data, so only disjoint ones are fused: each window joins the best chain of
+disjoint windows that ended before it began (the one with the most windows, then the latest),
+which with windows every half window length is every other one. The tolerances' systematic
+part is common to every window and is not reduced: the published covariance is the fused
+statistical one plus the newest window's systematic one.
+
+A stop of at least :data:`MIN_STOP_S` (the speed below the driving threshold) is where the load
+may change. Once a window lies wholly after such a stop, it is tested against the fused
+estimate of the windows wholly before it (two disjoint data sets: only their statistical parts
+count, the systematic part is common to both): ``χ² = dᵀ (S_after + P_before⁻¹)⁻¹ d`` on ``k``
+degrees of freedom. So that this comes soon, the first update with a window's worth of
+driving after a stop (``min_window_fill`` of ``window_s``) estimates from the driving after it
+alone (:meth:`Fusion.test_cut`), a probe that is fused only where it found a change (a window
+that begins as the vehicle pulls away reads the body a little less well: fused, such windows
+took the half hour's I_yy from -0.5 to -0.9 %). At ``p <`` :data:`CHANGE_P` the load changed
+at that stop: the fusion restarts from the windows after it (a window still reaching back
+over the stop publishes the estimate since it), the event is reported (``load changed at the stop at t =
+…: m 1000 → 1150 kg``) and counted. Until that window arrives the windows reaching over the
+stop are fused as any other (they hold both loads, which only the test can tell).
+
+What fusing cannot reduce: a varying drive's model (the mixture of local spectra,
+:mod:`~rozyn_estimator.method.likelihood.road_input`) is an approximation, which on urban windows
+read I_yy 0.5 %, m 0.3 % and l_f 0.1-0.2 % low (the half car; the full car's I_xx 0.4 %; docs/
+method.md, "Real drives"). One window's spread is 4-8 times that, but a half hour's fused
+estimate is as precise as the bias is large (its coverage of I_yy fell to 88 %). So the
+published covariance holds :data:`DRIVE_MODEL_FLOOR` of each value as a systematic part
+(``drive_model`` in the budget) in the share of the fused windows that were stop-and-go
+(masked in part: :func:`~rozyn_estimator.method.likelihood.road_input.unsteady`); steady
+windows, such as a highway's, carry none.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import chi2
+
+from rozyn_estimator.method import Estimate
+from rozyn_estimator.method.full import FullEstimate
+from rozyn_estimator.method.likelihood.road_input import unsteady
+from rozyn_estimator.online.driving import driving_time_s
+from rozyn_estimator.online.records import NS, Job, Update
+
+MIN_STOP_S = 5.0  # a stop this long may change the load
+# the test's level per stop: an urban half hour has about 20 tests, and the windows' tails are
+# heavier than a χ²'s (at 1e-4, 2 of 20 urban drives found a change where there was none)
+CHANGE_P = 1e-6
+MAX_CHAINS = 512  # chains kept since the last change (each an update's; the oldest go first)
+DRIVE_MODEL_FLOOR = 0.003  # the varying drive's model: share of each value (of 1 m for the lateral CoG)
+
+AnyEstimate = Estimate | FullEstimate
+
+
+@dataclass(frozen=True)
+class Chain:
+    """Disjoint windows fused: their summed information and information-weighted estimates."""
+
+    lo_ns: int  # the newest window's first sample
+    hi_ns: int  # the newest window's last sample
+    info: np.ndarray  # (k, k) Σ S_i⁻¹
+    weighted: np.ndarray  # (k,) Σ S_i⁻¹ θ_i
+    windows: int
+    unsteady: int = 0  # of them stop-and-go windows (masked in part)
+
+    @property
+    def covariance(self) -> np.ndarray:
+        return np.linalg.inv(self.info)
+
+    @property
+    def mean(self) -> np.ndarray:
+        return np.linalg.solve(self.info, self.weighted)
+
+
+@dataclass(frozen=True)
+class LoadChange:
+    """A detected change: the stop's start [ns], the mass before and after [kg], the test's p."""
+
+    stop_ns: int
+    mass_before_kg: float
+    mass_after_kg: float
+    p_value: float
+
+    def text(self) -> str:
+        p = f"p = {self.p_value:.1g}" if self.p_value >= 1e-9 else "p < 1e-9"
+        return (f"load changed at the stop at t = {self.stop_ns / NS:.1f} s: m {self.mass_before_kg:.0f} -> "
+                f"{self.mass_after_kg:.0f} kg ({p})")
+
+
+def statistical_covariance(est: AnyEstimate) -> np.ndarray | None:
+    """The estimate's statistical covariance (its budget's, else its whole covariance)."""
+    if est.budget is not None:
+        return np.asarray(est.budget.statistical)
+    return None if est.covariance is None else np.asarray(est.covariance)
+
+
+def stops_in(speed: tuple[np.ndarray, np.ndarray], threshold_mps: float,
+             min_stop_s: float = MIN_STOP_S) -> list[tuple[int, int]]:
+    """The complete stops in a window's speed samples: (first standing, first driving again) [ns]
+    of each run below ``threshold_mps`` lasting at least ``min_stop_s``."""
+    t, v = speed
+    if t.size < 2:
+        return []
+    standing = np.r_[False, v < threshold_mps, False]
+    edges = np.flatnonzero(np.diff(standing.astype(np.int8)))
+    out = []
+    for start, end in zip(edges[::2], edges[1::2], strict=True):
+        if end < t.size and start > 0 and (t[end] - t[start]) >= min_stop_s * NS:  # ended, and began here
+            out.append((int(t[start]), int(t[end])))
+    return out
+
+
+class Fusion:
+    """The windows' estimates fused since the last load change, and the changes found."""
+
+    def __init__(self) -> None:
+        self.reset()
+        self.changes: list[LoadChange] = []  # every change found, kept across resets
+
+    def reset(self) -> None:
+        """Forget the windows (a window reset: the data before it are another run's)."""
+        self._chains: list[Chain] = []
+        self._stops: dict[int, int] = {}  # stop start -> end [ns], not yet tested
+        self._tested: set[int] = set()  # the starts of the stops tested (later windows see them too)
+        self._restart_ns = -1  # windows must begin after this to be fused
+        self._fused: AnyEstimate | None = None
+        self._windows = 0
+
+    @property
+    def fused(self) -> AnyEstimate | None:
+        """The last published fused estimate (what a stop holds)."""
+        return self._fused
+
+    @property
+    def windows(self) -> int:
+        """How many windows the last published estimate fused (0: none yet)."""
+        return self._windows
+
+    def add(self, est: AnyEstimate, lo_ns: int, hi_ns: int, stops: list[tuple[int, int]],
+            unsteady: bool = False, probe: bool = False) -> AnyEstimate:
+        """The estimate to publish for a window ``[lo_ns, hi_ns]`` whose own estimate is ``est``,
+        the complete stops in it given, ``unsteady`` a stop-and-go window; a ``probe`` (cut to
+        a stop's end: :meth:`test_cut`) is fused only where it found a change (see the module)."""
+        self._register(stops)
+        stat = statistical_covariance(est)
+        if stat is None or est.params is None or not np.all(np.isfinite(stat)):
+            return est
+        try:
+            info = np.linalg.inv(stat)
+        except np.linalg.LinAlgError:
+            return est
+        found = len(self.changes)
+        self._test_stops(est, stat, lo_ns)
+        if probe and len(self.changes) == found and self._fused is not None:
+            return self._fused  # the load stays: the fused windows stand (a probe starts at pulling away)
+        if lo_ns <= self._restart_ns:  # it holds data from before the last change
+            if self._chains and self._fused is not None:
+                return self._fused  # the estimate since the change stands
+            self._fused, self._windows = est, 1
+            return est
+        before = self._best(lo_ns)
+        chain = Chain(lo_ns, hi_ns, info, info @ est.params, 1, int(unsteady)) if before is None else \
+            Chain(lo_ns, hi_ns, before.info + info, before.weighted + info @ est.params, before.windows + 1,
+                  before.unsteady + int(unsteady))
+        self._chains = [*self._chains, chain][-MAX_CHAINS:]
+        self._fused, self._windows = _published(est, chain), chain.windows
+        return self._fused
+
+    def test_cut(self, job: Job, min_driving_s: float, driving_mps: float) -> int | None:
+        """Where to start ``job``'s window so that it lies wholly after a stop not yet tested, with
+        at least ``min_driving_s`` of driving after it (the oldest such stop's end [ns]; None:
+        the window as it is)."""
+        self._register(stops_in(job.speed, driving_mps))
+        firsts = [int(stamps[0]) for stamps, _ in job.samples if stamps.size]
+        if not firsts:
+            return None
+        lo = min(firsts)
+        for start, end in sorted(self._stops.items()):
+            if start > lo and end <= job.due_ns and \
+                    driving_time_s(job.speed, end, job.due_ns, driving_mps) >= min_driving_s:
+                return end
+        return None
+
+    def _register(self, stops: list[tuple[int, int]]) -> None:
+        for start, end in stops:
+            if start > self._restart_ns and start not in self._stops and start not in self._tested:
+                self._stops[start] = end
+
+    def _best(self, before_ns: int) -> Chain | None:
+        """The chain with the most windows (then the latest) that ended by ``before_ns``."""
+        done = [c for c in self._chains if c.hi_ns <= before_ns]
+        return max(done, key=lambda c: (c.windows, c.hi_ns)) if done else None
+
+    def _test_stops(self, est: AnyEstimate, stat: np.ndarray, lo_ns: int) -> None:
+        """Test each stop this window lies wholly after; restart at one where the load changed."""
+        for start in sorted(s for s, end in self._stops.items() if end <= lo_ns):
+            end = self._stops.pop(start)
+            self._tested.add(start)
+            before = self._best(start)
+            if before is None or est.params is None:
+                continue
+            d = est.params - before.mean
+            try:
+                z2 = float(d @ np.linalg.solve(stat + before.covariance, d))
+            except np.linalg.LinAlgError:
+                continue
+            p = float(chi2.sf(z2, d.size))
+            if p < CHANGE_P:
+                self.changes.append(LoadChange(start, float(before.mean[0]), float(est.params[0]), p))
+                self._restart_ns = end - 1
+                self._chains = []
+                self._stops = {s: e for s, e in self._stops.items() if s > start}
+
+
+def _published(est: AnyEstimate, chain: Chain) -> AnyEstimate:
+    """``est`` with the chain's fused estimate and statistical covariance, its own systematic part
+    and the varying drive's model's (see the module's docstring)."""
+    if chain.windows == 1:
+        return est
+    params, fused_stat = chain.mean, chain.covariance
+    floor = DRIVE_MODEL_FLOOR * np.maximum(np.abs(params), 1.0) * (chain.unsteady / chain.windows)
+    if est.budget is None:
+        return dataclasses.replace(est, params=params, covariance=fused_stat + np.diag(floor**2))
+    budget = dataclasses.replace(est.budget, statistical=fused_stat,  # the same kind: the car's
+                                 contributions={**est.budget.contributions, "drive_model": floor})
+    return dataclasses.replace(est, params=params, covariance=budget.total, budget=budget)  # type: ignore[arg-type]
+
+
+def trimmed(job: Job, from_ns: int) -> Job:
+    """``job`` with its samples (and speeds) from ``from_ns`` on."""
+    samples = tuple((t[t >= from_ns], v[t >= from_ns]) for t, v in job.samples)
+    t, v = job.speed
+    return dataclasses.replace(job, samples=samples, speed=(t[t >= from_ns], v[t >= from_ns]))
+
+
+def _stop_and_go(speed: tuple[np.ndarray, np.ndarray], wheelbase_m: float) -> bool:
+    """Whether the window's speed samples make it a stop-and-go window (masked in part)."""
+    t, v = speed
+    if t.size < 2:
+        return False
+    fs = NS / float(np.median(np.diff(t)))
+    return unsteady(wheelbase_m, v, fs)
+
+
+def fuse_update(fusion: Fusion, update: Update, job: Job, driving_mps: float, wheelbase_m: float,
+                probe: bool = False) -> tuple[Update, str | None]:
+    """(the update to publish, the text of a load change it found or None): a published window's
+    estimate fused; a held one's the last fused estimate."""
+    if update.held and fusion.fused is not None:
+        return dataclasses.replace(update, estimate=fusion.fused, fused_windows=fusion.windows,
+                                   load_changes=len(fusion.changes)), None
+    if not update.published or update.estimate is None:
+        return update, None
+    firsts = [int(stamps[0]) for stamps, _ in job.samples if stamps.size]
+    found = len(fusion.changes)
+    est = fusion.add(update.estimate, min(firsts, default=update.stamp_ns), update.stamp_ns,
+                     stops_in(job.speed, driving_mps), _stop_and_go(job.speed, wheelbase_m), probe)
+    change = fusion.changes[-1].text() if len(fusion.changes) > found else None
+    return dataclasses.replace(update, estimate=est, fused_windows=fusion.windows,
+                               load_changes=len(fusion.changes)), change
+
+
+__all__ = ["CHANGE_P", "DRIVE_MODEL_FLOOR", "MIN_STOP_S", "Chain", "Fusion", "LoadChange", "fuse_update",
+           "statistical_covariance", "stops_in", "trimmed"]

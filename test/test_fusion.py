@@ -1,0 +1,183 @@
+"""Information accumulates while the load stays; a load change at a stop is found
+(rozyn_estimator.online.fusion), and the online estimator publishes both."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from rozyn_estimator.method import Estimate
+from rozyn_estimator.method.budget import Budget
+from rozyn_estimator.online.batch import SpeedSamples
+from rozyn_estimator.online.fusion import DRIVE_MODEL_FLOOR, Fusion, stops_in, trimmed
+from rozyn_estimator.online.records import NS, Job
+
+S = 1_000_000_000  # ns per second
+STD = np.array([10.0, 40.0, 0.01])  # a window's statistical std (m, I_yy, l_f)
+
+
+def _estimate(params, std=STD, systematic=None) -> Estimate:
+    cov = np.diag(np.asarray(std) ** 2)
+    budget = None if systematic is None else Budget(cov, {"k": np.asarray(systematic)})
+    return Estimate(status="ok", params=np.asarray(params, dtype=float),
+                    covariance=cov if budget is None else budget.total, budget=budget)
+
+
+def _windows(start_s: float, count: int, every_s: float = 60.0, length_s: float = 120.0):
+    """(lo, hi) of windows every ``every_s`` of ``length_s`` from ``start_s``."""
+    starts = [start_s + k * every_s for k in range(count)]
+    return [(int(a * S), int((a + length_s) * S)) for a in starts]
+
+
+def test_stops_are_runs_below_the_threshold_that_began_and_ended_in_the_window():
+    t = np.arange(0, 100.0, 0.1)
+    v = np.full(t.size, 10.0)
+    v[(t >= 20) & (t < 30)] = 0.0  # a 10 s stop
+    v[(t >= 50) & (t < 53)] = 0.0  # 3 s: too short
+    v[t >= 95] = 0.0  # not over yet
+    stops = stops_in(((t * NS).astype(np.int64), v), 2.0)
+    assert stops == [(20 * S, 30 * S)]
+    v[t < 10] = 0.0  # begun before the window: its start unknown
+    assert stops_in(((t * NS).astype(np.int64), v), 2.0) == [(20 * S, 30 * S)]
+
+
+def test_disjoint_windows_are_fused_by_their_information_and_overlapping_ones_are_not():
+    fusion = Fusion()
+    rng = np.random.default_rng(1)
+    truth = np.array([1000.0, 2000.0, 1.2])
+    own = []
+    for lo, hi in _windows(0.0, 9):  # every 60 s, 120 s long: every other one is disjoint
+        params = truth + STD * rng.standard_normal(3)
+        own.append(params)
+        out = fusion.add(_estimate(params), lo, hi, [])
+    assert fusion.windows == 5  # windows 0, 2, 4, 6, 8
+    np.testing.assert_allclose(out.params, np.mean(own[::2], axis=0))  # equal information: the mean
+    np.testing.assert_allclose(np.sqrt(np.diag(out.covariance)), STD / np.sqrt(5))
+
+
+def test_the_systematic_part_is_not_reduced():
+    fusion = Fusion()
+    sys = np.array([30.0, 60.0, 0.03])
+    for lo, hi in _windows(0.0, 7, every_s=120.0):
+        out = fusion.add(_estimate([1000.0, 2000.0, 1.2], systematic=sys), lo, hi, [])
+    np.testing.assert_allclose(np.diag(out.budget.statistical), STD**2 / 7)
+    np.testing.assert_allclose(np.diag(out.covariance), STD**2 / 7 + sys**2)
+
+
+def test_stop_and_go_windows_keep_their_models_floor_which_fusing_does_not_reduce():
+    for unsteady in (False, True):
+        fusion = Fusion()
+        for lo, hi in _windows(0.0, 7, every_s=120.0):
+            out = fusion.add(_estimate([1000.0, 2000.0, 1.2]), lo, hi, [], unsteady=unsteady)
+        floor = DRIVE_MODEL_FLOOR * np.array([1000.0, 2000.0, 1.2]) if unsteady else np.zeros(3)
+        np.testing.assert_allclose(np.diag(out.covariance), STD**2 / 7 + floor**2)
+
+
+def _drive(fusion: Fusion, before, after, stop_s: float = 400.0, count: int = 14):
+    """Windows every 60 s; the vehicle stands 10 s at ``stop_s``; ``before``/``after``: the
+    windows' params wholly before and from the stop on (a window over it: their mean)."""
+    stop = (int(stop_s * S), int((stop_s + 10) * S))
+    published = []
+    for lo, hi in _windows(0.0, count):
+        params = before if hi <= stop[0] else after if lo >= stop[1] else (np.add(before, after) / 2)
+        published.append(fusion.add(_estimate(params), lo, hi, [stop] if lo < stop[0] < hi else []))
+    return published
+
+
+def test_a_load_change_at_a_stop_is_found_and_the_fusion_restarts_after_it():
+    fusion = Fusion()
+    loaded = [1150.0, 2047.0, 1.278]
+    published = _drive(fusion, [1000.0, 2000.0, 1.2], loaded)
+    assert len(fusion.changes) == 1
+    assert fusion.changes[0].text().startswith("load changed at the stop at t = 400.0 s: m 1000 -> 1150 kg")
+    np.testing.assert_allclose(published[-1].params, loaded)  # only the windows after the stop
+    # the first window wholly after the stop (410-530 s: the update at 540 s) is where it is found
+    first = next(k for k, (lo, _) in enumerate(_windows(0.0, 14)) if lo >= 410 * S)
+    np.testing.assert_allclose(published[first].params, loaded)
+    assert not np.allclose(published[first - 1].params, loaded)
+
+
+def test_an_unchanged_load_is_not_a_change():
+    rng = np.random.default_rng(2)
+    changes = 0
+    for _ in range(50):
+        fusion = Fusion()
+        base = np.array([1000.0, 2000.0, 1.2])
+        stop = (int(400 * S), int(410 * S))
+        for lo, hi in _windows(0.0, 14):
+            fusion.add(_estimate(base + STD * rng.standard_normal(3)), lo, hi,
+                       [stop] if lo < stop[0] < hi else [])
+        changes += len(fusion.changes)
+    assert changes == 0
+
+
+def test_a_window_holding_data_from_before_the_change_publishes_the_estimate_since():
+    fusion = Fusion()
+    _drive(fusion, [1000.0, 2000.0, 1.2], [1150.0, 2047.0, 1.278], count=10)  # found at 540 s
+    assert fusion.changes
+    restart = fusion._restart_ns
+    out = fusion.add(_estimate([1100.0, 2000.0, 1.25]), restart - 5 * S, restart + 100 * S, [])
+    assert out.params[0] == 1150.0  # the mixed window is not published: the estimate since the change
+    fresh = Fusion()  # with nothing since a change, a window stands alone
+    fresh._restart_ns = 100 * S
+    assert fresh.add(_estimate([1100.0, 2000.0, 1.25]), 50 * S, 170 * S, []).params[0] == 1100.0
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_an_estimate_without_a_usable_covariance_is_published_as_it_is(bad):
+    fusion = Fusion()
+    est = Estimate(status="ok", params=np.array([1000.0, 2000.0, 1.2]), covariance=np.full((3, 3), bad))
+    assert fusion.add(est, 0, 120 * S, []) is est
+
+
+def test_online_the_load_put_in_at_a_stop_is_found_and_reported():
+    """An urban drive with 150 kg put in at its stop at 332-348 s: the online estimator reports
+    the change once, and then publishes the loaded vehicle's estimate."""
+    from rozyn_estimator.method import METHODS
+    from rozyn_estimator.online import OnlineConfig, OnlineEstimator
+    from rozyn_estimator.tolerances import Tolerances
+    from rozyn_estimator.vehicle import Vehicle
+    from sim_node.load_change import with_point_load
+    from sim_node.road import RoadSpec
+    from sim_node.simulation import SimConfig, Simulation
+
+    vehicle = Vehicle(tolerances=Tolerances.none())
+    sim = Simulation(SimConfig(vehicle=vehicle, drive_cycle_file="udds", road=RoadSpec(amplitudes="gaussian"),
+                               seed=3, noise_std_mps2=0.025, load_change_kg=150.0, load_change_x_m=0.6,
+                               load_change_at_s=340.0))
+    block = sim.run(520.0)
+    est = OnlineEstimator(vehicle, OnlineConfig(update_period_s=20.0), METHODS["likelihood"])
+    stamps = (block.t_s * NS).astype(np.int64)
+    speed = SpeedSamples(stamps[::10], block.speed_mps[::10].tolist(), np.arange(0, stamps.size, 10) * 2)
+    channels = np.tile([0, 1], stamps.size)
+    jobs = est.add_batch(channels, np.repeat(stamps, 2), block.accel_mps2.ravel(), speed=speed)
+    updates = [est.compute(job) for job, _ in jobs]
+    assert updates[-1].load_changes == 1
+    message = est.report().message
+    assert re.search(r"load changed at the stop at t = 33\d\.\d s: m 1\d\d\d -> 11\d\d kg", message)
+    assert est.report().message.count("load changed") == 0  # said once
+    truth = with_point_load(vehicle, 150.0, 0.6).sprung_mass_kg
+    last = updates[-1]
+    assert abs(last.params[0] - truth) < 3 * np.sqrt(last.covariance[0, 0])
+    before = [u for u in updates if u.published and u.stamp_ns < 333 * S]
+    assert before[-1].fused_windows >= 1 and abs(before[-1].params[0] - 1000.0) < 3 * np.sqrt(
+        before[-1].covariance[0, 0])
+
+
+def test_the_first_update_with_enough_driving_after_a_stop_is_cut_to_it_once():
+    t = np.arange(0, 200.0, 0.1)
+    stamps = (t * NS).astype(np.int64)
+    v = np.full(t.size, 10.0)
+    v[(t >= 50) & (t < 60)] = 0.0
+    job = Job(int(200 * S), ((stamps, np.zeros(t.size)), (stamps, np.zeros(t.size))), (stamps, v))
+    fusion = Fusion()
+    assert fusion.test_cut(job, 150.0, 2.0) is None  # 140 s of driving after the stop: not enough
+    cut = fusion.test_cut(job, 96.0, 2.0)
+    assert cut == 60 * S
+    after = trimmed(job, cut)
+    assert after.samples[0][0][0] == 60 * S and after.speed[0][0] == 60 * S
+    fusion.add(_estimate([1000.0, 2000.0, 1.2]), 0, 50 * S, [])  # a window before the stop
+    fusion.add(_estimate([1000.0, 2000.0, 1.2]), 60 * S, 200 * S, [])  # its test
+    assert fusion.test_cut(job, 96.0, 2.0) is None  # tested: the next windows are whole again
