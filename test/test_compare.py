@@ -132,3 +132,15 @@ def test_mismatch(index):
         assert s.model_warn_share >= warns[0], (case.label, s.model_warn_share)
     if case.label.startswith(IN_MODEL):
         assert s.model_warn_share <= 0.05, (case.label, s.model_warn_share)
+
+
+def test_the_drive_cycles_suite_drives_each_shipped_cycle_on_both_cars():
+    from rozyn_estimator.vehicle_full import FullVehicle
+
+    for vehicle in (SECOND_VEHICLE, FullVehicle()):
+        cases = suite("drive-cycles", TrialSpec(vehicle=vehicle))
+        assert {c.spec.drive_cycle for c in cases} == {"udds", "hwfet", "wltc3b"}
+        assert all(c.spec.duration_s == 300.0 and c.bars is not None for c in cases)
+        assert any(c.spec.vehicle.cog_height_m > 0 for c in cases)  # the load transfer on
+        own = [c for c in cases if c.spec.vehicle.tolerances == vehicle.tolerances]
+        assert len(own) == 1 and own[0].bars.bias_pct is None

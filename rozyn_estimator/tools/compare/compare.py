@@ -83,7 +83,8 @@ def format_case(case: Case, results: dict[str, list[TrialResult]], fmt: str = "t
     """A table of one case: a row per method and parameter, and its verdicts."""
     spec, car = case.spec, case.spec.car
     truth = " / ".join(f"{x:g} {p.unit}" for x, p in zip(spec.truth, car.params, strict=True))
-    head = (f"{case.label} — {car.title}, {spec.road} ({spec.amplitudes}), {spec.speed_kmh:g} km/h, "
+    drive = f"drive cycle {spec.drive_cycle}" if spec.drive_cycle else f"{spec.speed_kmh:g} km/h"
+    head = (f"{case.label} — {car.title}, {spec.road} ({spec.amplitudes}), {drive}, "
             f"{spec.duration_s:g} s at {spec.rate_hz:g} Hz, {spec.noise_fraction:.0%} noise; truth {truth}; "
             f"{len(next(iter(results.values())))} seeds")
     cols = ("method", "parameter", "mean", "bias", "std", "rms error", "reported std", "95 % cover",

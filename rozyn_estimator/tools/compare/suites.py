@@ -11,7 +11,9 @@ The half car's:
   contain the departures.
 
 The full car's ``acceptance`` (four speeds and a Laplace road) and ``mismatch`` (the same
-departures at every corner). ``methods``, ``acceptance`` and ``robustness`` measure the
+departures at every corner). Both cars' ``drive-cycles``: 300 s of each shipped cycle from its
+start (urban, highway, WLTC), one with the heights given (the load transfer on), one with the
+default tolerances. ``methods``, ``acceptance`` and ``robustness`` measure the
 estimator on the simulator's own vehicle known exactly (``tolerances: {}``), whatever
 tolerances the base vehicle carries.
 """
@@ -29,7 +31,8 @@ from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import FullTolerances
 from sim_node.departures import Departures
 
-SUITES = {"half": ("methods", "acceptance", "robustness", "mismatch"), "full": ("acceptance", "mismatch")}
+SUITES = {"half": ("methods", "acceptance", "robustness", "mismatch", "drive-cycles"),
+          "full": ("acceptance", "mismatch", "drive-cycles")}
 
 
 @dataclass(frozen=True)
@@ -76,6 +79,8 @@ def suite(name: str, base: TrialSpec) -> list[Case]:
     iso = base.replace(road="iso", amplitudes="gaussian", road_class="A", speed_kmh=100.0, duration_s=100.0,
                        rate_hz=100.0, waviness=2.0, noise_std_mps2=0.0, noise_fraction=0.0, vehicle=exact)
     noisy = iso.replace(noise_fraction=0.1)
+    if name == "drive-cycles":
+        return _drive_cycles(noisy, base.vehicle)
     if car == "full":
         return _full_acceptance(noisy) if name == "acceptance" else \
             _full_mismatch(noisy.replace(duration_s=120.0, vehicle=base.vehicle))
@@ -162,6 +167,24 @@ def _half_mismatch(noisy: TrialSpec) -> list[Case]:
         case("tyres 10 % soft and dampers 2x in rebound, default tolerances with tyres 10 %", COVERS,
              dataclasses.replace(default, **tyres), tyre_stiffness_error=1 / 0.9 - 1,
              departures=Departures(damper_ratio=2.0)),
+    ]
+
+
+def _drive_cycles(noisy: TrialSpec, vehicle: Any) -> list[Case]:
+    """300 s of each shipped cycle from its start (idling, pulling away, stops), the vehicle
+    known exactly, 10 % noise; the urban cycle with the heights given (accelerating and braking
+    pitch the body) and with the vehicle's own tolerances."""
+    bars = Bars(bias_pct=0.5)
+    drive = noisy.replace(duration_s=300.0)
+    heights = drive.vehicle.replace(cog_height_m=0.55, wheel_centre_height_m=0.30)
+    return [
+        Case("urban (udds), 300 s", drive.replace(drive_cycle="udds"), bars),
+        Case("highway (hwfet), 300 s", drive.replace(drive_cycle="hwfet"), bars),
+        Case("WLTC class 3b, 300 s", drive.replace(drive_cycle="wltc3b"), bars),
+        Case("urban, CoG 0.55 m and wheel centres 0.30 m up (load transfer)",
+             drive.replace(drive_cycle="udds", vehicle=heights), bars),
+        Case("urban, the vehicle's own tolerances", drive.replace(drive_cycle="udds", vehicle=vehicle),
+             COVERS),
     ]
 
 
