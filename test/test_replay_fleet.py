@@ -149,6 +149,11 @@ def test_the_plot_reads_its_columns_by_name(fleet, tmp_path):
     b = replay_plot.plot_estimates(shuffled, tmp_path / "b.png", truth=(1000.0, 2000.0, 1.2))
     assert np.array_equal(matplotlib.image.imread(a), matplotlib.image.imread(b))
     assert "published" in replay_plot._status_counts(series)
+    # a load change: the truth drawn as steps from each of its stamps
+    first = int(series.stamp_s[0] * 1e9)
+    steps = {first: (1000.0, 2000.0, 1.2), first + 30 * 10**9: (1150.0, 2047.0, 1.278)}
+    c = replay_plot.plot_estimates(out / "updates.csv", tmp_path / "c.png", truth=steps)
+    assert not np.array_equal(matplotlib.image.imread(a), matplotlib.image.imread(c))
 
 
 def test_plot_asked_for_without_matplotlib_is_one_clear_error(fleet, tmp_path, capsys, monkeypatch):

@@ -227,7 +227,7 @@ def run(args: argparse.Namespace) -> int:
         depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
     )
     probe.create_subscription(
-        InertiaStamped, "sim/ground_truth", lambda m: setattr(seen, "truth", m), latched
+        InertiaStamped, "sim/ground_truth", seen.take_truth, latched
     )
     def on_inertia(msg: Any) -> None:
         seen.inertia[ros_io.stamp_ns(msg.header.stamp)] = msg

@@ -30,6 +30,7 @@ class Seen:
 
     layout: Layout
     truth: Any = None
+    truth_steps: dict[int, tuple[float, ...]] = field(default_factory=dict)  # stamp [ns] -> the truth since
     inertia: dict[int, Any] = field(default_factory=dict)
     covariance: dict[int, Any] = field(default_factory=dict)
     printed: set[int] = field(default_factory=set)
@@ -39,6 +40,11 @@ class Seen:
     @property
     def rows(self) -> tuple[tuple[str, int, str], ...]:
         return FULL_ROWS if self.layout.full else HALF_ROWS
+
+    def take_truth(self, msg: Any) -> None:
+        """A ``sim/ground_truth`` message: the truth from its stamp on."""
+        self.truth = msg
+        self.truth_steps[msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec] = self.values(msg)
 
     def values(self, msg: Any) -> tuple[float, ...]:
         """An InertiaStamped's parameters in the layout's order (the front axle at x = 0)."""
@@ -105,7 +111,8 @@ def write_outputs(out_dir: Path, updates: Sequence[Any], seen: Seen, args: argpa
     car = "full car, " if seen.layout.full else ""
     png = plot_estimates(
         out_dir / "updates.csv", out_dir / PLOT_NAME,
-        truth=None if seen.truth is None else seen.values(seen.truth),
+        truth=seen.truth_steps if len(seen.truth_steps) > 1 else None if seen.truth is None else
+        seen.values(seen.truth),
         title=f"rozyn demo: {car}{args.road} road ({args.amplitudes}), {drive_label(args)}",
     )
     print(f"plot: {png}")

@@ -114,7 +114,7 @@ def replay_bag(bag: Path, out_dir: Path, options: ReplayOptions, progress: bool 
         )
     result.config_source = source
     if plot and result.updates:
-        result.plot = plot_estimates(out_dir / "updates.csv", out_dir / PLOT_NAME, truth=result.truth,
+        result.plot = plot_estimates(out_dir / "updates.csv", out_dir / PLOT_NAME, truth=_truth(result),
                                      recorded=result.recorded, title=str(bag))
     return result
 
@@ -360,6 +360,11 @@ def _type_choice(msgtype: str) -> str:
     return next((k for k, (t, _) in SPEED_TOPIC_TYPES.items() if t == msgtype), "twist|odometry")
 
 
+def _truth(result: ReplayResult) -> Any:
+    """What the plot draws as the truth: its steps where it changed (a load change), else the truth."""
+    return result.truth_steps if len(set(result.truth_steps.values())) > 1 else result.truth
+
+
 def _note_extra(
     result: ReplayResult, reader: BagReader, topic: str, data: bytes, msgtype: str, config: EstimatorConfig
 ) -> None:
@@ -373,6 +378,7 @@ def _note_extra(
     values = inertia_values(msg.inertia, config.front_axle_x_m, config.full_vehicle is not None)
     if topic == TRUTH_TOPIC:
         result.truth = values
+        result.truth_steps[msg.header.stamp.sec * NS + msg.header.stamp.nanosec] = values
     else:
         result.recorded[msg.header.stamp.sec * NS + msg.header.stamp.nanosec] = values
 

@@ -77,7 +77,8 @@ class ReplayResult:
     speed_messages: int = 0
     feed_s: float = 0.0
     update_s: float = 0.0
-    truth: tuple[float, ...] | None = None  # from sim/ground_truth (m, I, lf; the full car's five)
+    truth: tuple[float, ...] | None = None  # from sim/ground_truth (m, I, lf; the full car's five): the last
+    truth_steps: dict[int, tuple[float, ...]] = field(default_factory=dict)  # stamp -> truth (load changes)
     recorded: dict[int, tuple[float, ...]] = field(default_factory=dict)  # stamp -> node's estimate
     out_dir: Path | None = None
     out_counts: dict[str, int] = field(default_factory=dict)

@@ -108,7 +108,7 @@ def plot_estimates(
     updates_csv: Path,
     png: Path,
     *,
-    truth: Sequence[float] | None = None,
+    truth: Sequence[float] | Mapping[int, Sequence[float]] | None = None,
     recorded: Mapping[int, Sequence[float]] | None = None,
     title: str = "",
 ) -> Path:
@@ -117,7 +117,8 @@ def plot_estimates(
     Args:
         updates_csv: the run's ``updates.csv``.
         png: the figure to write.
-        truth: the true (m, I_yy, l_f) (a full car's five), when known.
+        truth: the true (m, I_yy, l_f) (a full car's five), when known; or by stamp [ns] where
+            it changed (a load change: drawn as steps).
         recorded: the node's published (m, I_yy, l_f) (the full car's five) by stamp [ns], when
             the bag holds them.
         title: the figure's title (e.g. the bag's name).
@@ -163,8 +164,8 @@ def _origin(stamp_s: np.ndarray, recorded: Mapping[int, Sequence[float]] | None)
 
 
 def _parameter_panel(ax: Axes, series: UpdateSeries, t: np.ndarray, name: str, ylabel: str, index: int,
-                     truth: Sequence[float] | None, recorded: Mapping[int, Sequence[float]] | None,
-                     t0: float) -> None:
+                     truth: Sequence[float] | Mapping[int, Sequence[float]] | None,
+                     recorded: Mapping[int, Sequence[float]] | None, t0: float) -> None:
     value, std = series.column(name), series.column(f"{name}_std")
     ok = series.published & np.isfinite(value)
     if ok.any():
@@ -176,7 +177,13 @@ def _parameter_panel(ax: Axes, series: UpdateSeries, t: np.ndarray, name: str, y
         stamps = np.array(sorted(recorded), dtype=np.int64)
         values = np.array([recorded[s][index] for s in stamps])
         ax.plot(stamps / 1e9 - t0, values, "x", color="black", markersize=5, label="published by the node")
-    if truth is not None:
+    if isinstance(truth, Mapping):  # steps at its changes, on to the last update
+        changes = sorted(truth)
+        xs = [c / 1e9 - t0 for c in changes] + [max(float(t.max(initial=0.0)), changes[-1] / 1e9 - t0)]
+        ys = [truth[c][index] for c in changes]
+        ax.step(xs, [*ys, ys[-1]], where="post", color="tab:green", linestyle="--", linewidth=1.2,
+                label="truth")
+    elif truth is not None:
         ax.axhline(truth[index], color="tab:green", linestyle="--", linewidth=1.2, label="truth")
     ax.set_ylabel(ylabel)
     ax.grid(alpha=0.3)
