@@ -2,6 +2,7 @@
 
     ros2 launch rozyn_estimator sim_estimator.launch.py [road:=laplace] [class:=B]
         [amplitudes:=fixed] [speed_kmh:=50 | drive_cycle:=udds] [duration_s:=300] [vehicle_file:=my_car.yaml]
+        [load_change_kg:=150 load_change_x_m:=0.6 load_change_at_s:=340]
         [model:=full] [record:=true] [bag_dir:=bags] [real_time_factor:=5]
 
 The simulator (``config/sim.yaml``, on sim time at ``real_time_factor`` times real time,
@@ -47,6 +48,12 @@ def generate_launch_description() -> LaunchDescription:
         DeclareLaunchArgument("drive_cycle", default_value="",
                               description="follow a drive cycle instead of speed_kmh: udds, hwfet, wltc3b "
                                           "or a CSV of time_s and speed_kmh"),
+        DeclareLaunchArgument("load_change_kg", default_value="0.0",
+                              description="a point load put in at a stop of the drive cycle [kg] (0: none)"),
+        DeclareLaunchArgument("load_change_x_m", default_value="0.0",
+                              description="where that load sits behind the centre of gravity [m]"),
+        DeclareLaunchArgument("load_change_at_s", default_value="0.0",
+                              description="when the load changes [s]: the vehicle must stand then"),
         DeclareLaunchArgument("duration_s", default_value="0.0",
                               description="simulated time [s] (the launch ends with it); 0: until Ctrl-C"),
         DeclareLaunchArgument("real_time_factor", default_value="5.0",
@@ -76,6 +83,8 @@ def generate_launch_description() -> LaunchDescription:
                 "road.amplitudes": ParameterValue(arg("amplitudes"), value_type=str),
                 "speed_kmh": ParameterValue(arg("speed_kmh"), value_type=float),
                 "drive_cycle_file": ParameterValue(arg("drive_cycle"), value_type=str),
+                **{name: ParameterValue(arg(name), value_type=float)
+                   for name in ("load_change_kg", "load_change_x_m", "load_change_at_s")},
                 "duration_s": ParameterValue(arg("duration_s"), value_type=float),
                 "real_time_factor": ParameterValue(arg("real_time_factor"), value_type=float),
                 "vehicle_file": vehicle,
