@@ -49,26 +49,39 @@ class DriveCycle:
     @property
     def length_m(self) -> float:
         """The distance one pass of the cycle covers."""
-        return float(self._cumulative()[-1])
+        return float(self._cumulative[-1])
 
+    # The rows' tables, made once: every simulated block reads them (the rows do not change).
+    @functools.cached_property
     def _cumulative(self) -> np.ndarray:
+        """The distance [m] at each row."""
         return np.concatenate(([0.0], np.cumsum(np.diff(self.time_s) * 0.5 * (self.speed_mps[1:]
                                                                               + self.speed_mps[:-1]))))
+
+    @functools.cached_property
+    def _slopes(self) -> np.ndarray:
+        """The acceleration [m/s²] between rows."""
+        return np.diff(self.speed_mps) / np.diff(self.time_s)
+
+    @functools.cached_property
+    def _integrals(self) -> np.ndarray:
+        """``∫_0`` of the linear distance [m s] up to each row."""
+        d0, dt = self._cumulative, np.diff(self.time_s)
+        v, a = self.speed_mps[:-1], self._slopes
+        return np.concatenate(([0.0], np.cumsum(d0[:-1] * dt + v * dt**2 / 2 + a * dt**3 / 6)))
 
     def _linear_distance(self, t: np.ndarray) -> np.ndarray:
         """The distance [m] from t = 0 of the rows joined linearly (exact: quadratic between rows)."""
         laps, local = np.divmod(t, self.duration_s)
         k, tau = self._piece(local)
         within = self.speed_mps[k] * tau + 0.5 * self._slopes[k] * tau * tau
-        return laps * self.length_m + self._cumulative()[k] + within
+        return laps * self.length_m + self._cumulative[k] + within
 
     def _distance_integral(self, t: np.ndarray) -> np.ndarray:
         """``∫_0^t`` of :meth:`_linear_distance` [m s]: cubic between rows, laps in closed form."""
         laps, local = np.divmod(t, self.duration_s)
         k, tau = self._piece(local)
-        d0, dt = self._cumulative(), np.diff(self.time_s)
-        v, a = self.speed_mps[:-1], self._slopes
-        pieces = np.concatenate(([0.0], np.cumsum(d0[:-1] * dt + v * dt**2 / 2 + a * dt**3 / 6)))
+        d0, pieces = self._cumulative, self._integrals
         within = d0[k] * tau + self.speed_mps[k] * tau**2 / 2 + self._slopes[k] * tau**3 / 6
         one_lap, length = pieces[-1], self.length_m
         # laps before: each a lap's integral plus the distance of the laps before it
@@ -78,10 +91,6 @@ class DriveCycle:
     def _piece(self, local: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         k = np.clip(np.searchsorted(self.time_s, local, side="right") - 1, 0, self.time_s.size - 2)
         return k, local - self.time_s[k]
-
-    @property
-    def _slopes(self) -> np.ndarray:
-        return np.diff(self.speed_mps) / np.diff(self.time_s)
 
     def speed_at(self, t_s: np.ndarray) -> np.ndarray:
         """The speed [m/s] at times ``t_s`` (the cycle repeated, before 0 too; averaged over

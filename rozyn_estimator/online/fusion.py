@@ -178,10 +178,9 @@ class Fusion:
         at least ``min_driving_s`` of driving after it (the oldest such stop's end [ns]; None:
         the window as it is)."""
         self._register(stops_in(job.speed, driving_mps))
-        firsts = [int(stamps[0]) for stamps, _ in job.samples if stamps.size]
-        if not firsts:
+        lo = first_stamp_ns(job)
+        if lo is None:
             return None
-        lo = min(firsts)
         for start, end in sorted(self._stops.items()):
             if start > lo and end <= job.due_ns and \
                     driving_time_s(job.speed, end, job.due_ns, driving_mps) >= min_driving_s:
@@ -233,6 +232,11 @@ def _published(est: AnyEstimate, chain: Chain) -> AnyEstimate:
     return dataclasses.replace(est, params=params, covariance=budget.total, budget=budget)  # type: ignore[arg-type]
 
 
+def first_stamp_ns(job: Job) -> int | None:
+    """The window's first sample's stamp [ns] (None: no samples)."""
+    return min((int(stamps[0]) for stamps, _ in job.samples if stamps.size), default=None)
+
+
 def trimmed(job: Job, from_ns: int) -> Job:
     """``job`` with its samples (and speeds) from ``from_ns`` on."""
     samples = tuple((t[t >= from_ns], v[t >= from_ns]) for t, v in job.samples)
@@ -258,9 +262,9 @@ def fuse_update(fusion: Fusion, update: Update, job: Job, driving_mps: float, wh
                                    load_changes=len(fusion.changes)), None
     if not update.published or update.estimate is None:
         return update, None
-    firsts = [int(stamps[0]) for stamps, _ in job.samples if stamps.size]
+    lo = first_stamp_ns(job)
     found = len(fusion.changes)
-    est = fusion.add(update.estimate, min(firsts, default=update.stamp_ns), update.stamp_ns,
+    est = fusion.add(update.estimate, update.stamp_ns if lo is None else lo, update.stamp_ns,
                      stops_in(job.speed, driving_mps), _stop_and_go(job.speed, wheelbase_m), probe)
     change = fusion.changes[-1].text() if len(fusion.changes) > found else None
     return dataclasses.replace(update, estimate=est, fused_windows=fusion.windows,
