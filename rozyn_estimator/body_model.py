@@ -89,13 +89,23 @@ def half_car_model(v: Vehicle) -> SecondOrderModel:
 
 
 def half_car_sensor_rows(v: Vehicle) -> np.ndarray:
-    """(2, 4) map from ``q`` to the body's vertical motion at the two sensors."""
+    """(2, 4) map from ``q`` to what the two channels read: an accelerometer the body's vertical
+    motion at its position, a pitch gyro (``gyro_y``, REP 103: positive nose down) ``-phi``; the
+    gyro reads the rate of its row, an accelerometer the acceleration (:func:`half_car_sensor_rates`)."""
     lf = v.cog_from_front_axle_m
     rows = np.zeros((2, HALF_DOF))
     for i, x in enumerate(v.sensor_x_m):
         rows[i, 2] = 1.0
         rows[i, 3] = lf - x
+    if v.pitch_gyro:
+        rows[1] = 0.0
+        rows[1, HALF_PITCH] = -1.0
     return rows
+
+
+def half_car_sensor_rates(v: Vehicle) -> np.ndarray:
+    """(2,) bool: the channel reads its row's rate (a gyro), not its acceleration."""
+    return np.array([False, v.pitch_gyro])
 
 
 def half_car_suspension_rows(v: Vehicle) -> np.ndarray:

@@ -22,6 +22,7 @@ import yaml
 
 from rozyn_estimator.errors import ConfigError, RozynError
 from rozyn_estimator.parameters import build, check, param, spec_of
+from rozyn_estimator.sensors import Channel, SensorSet, half_car_channels, sensors_from_mapping
 from rozyn_estimator.tolerances import Tolerances
 
 
@@ -71,6 +72,9 @@ class Vehicle:
                                          "0: not given)", unit="m", low=0.0)
     tolerances: Tolerances = param(description="standard uncertainties of the assumed values",
                                    default_factory=Tolerances)
+    # the sensors block (rozyn_estimator.sensors; None: the two accelerometers at the offsets above).
+    # Its positions are the offsets' (with_sensors): the budget perturbs those, the block names channels.
+    sensors: SensorSet | None = dataclasses.field(default=None)
 
     def __post_init__(self) -> None:
         check(self, _RULES)
@@ -85,14 +89,52 @@ class Vehicle:
         """(front, rear) sensor positions from the front axle, rearward [m]."""
         return (self.sensor_front_offset_m, self.wheelbase_m + self.sensor_rear_offset_m)
 
+    @property
+    def channels(self) -> tuple[Channel, Channel]:
+        """The two channels the model fits (accelerometer first), at :attr:`sensor_x_m`."""
+        if self.sensors is None:
+            x = self.sensor_x_m
+            return Channel("front", "accel_z", "", x[0]), Channel("rear", "accel_z", "", x[1])
+        first, second = half_car_channels(self.sensors, self.wheelbase_m)
+        x = self.sensor_x_m
+        return dataclasses.replace(first, x_m=x[0]), dataclasses.replace(second, x_m=x[1])
+
+    @property
+    def channel_names(self) -> tuple[str, str]:
+        """How messages name the two channels: ``front``/``rear``, or a sensors block's labels."""
+        if self.sensors is None:
+            return ("front", "rear")
+        first, second = self.channels
+        return first.label, second.label
+
+    @property
+    def pitch_gyro(self) -> bool:
+        """The second channel is a pitch gyro (``gyro_y``), not an accelerometer."""
+        return self.sensors is not None and self.channels[1].kind == "gyro_y"
+
+    def with_sensors(self, sensors: SensorSet | None) -> Vehicle:
+        """A copy with the sensors of a ``sensors`` block: their positions become the offsets
+        (an IMU's both); ConfigError for a set the half car cannot use."""
+        if sensors is None:
+            return self.replace(sensors=None)
+        first, second = half_car_channels(sensors, self.wheelbase_m)
+        tolerances = self.tolerances
+        if second.kind == "gyro_y":  # a gyro reads the same pitch anywhere: its position is no error
+            tolerances = dataclasses.replace(tolerances, sensor_rear_offset_m=0.0)
+        return self.replace(sensors=sensors, sensor_front_offset_m=first.x_m,
+                            sensor_rear_offset_m=second.x_m - self.wheelbase_m, tolerances=tolerances)
+
     def replace(self, **changes: Any) -> Vehicle:
         """A copy with some fields changed (validated)."""
         return dataclasses.replace(self, **changes)
 
     def to_dict(self) -> dict[str, Any]:
-        """The fields (floats) and ``tolerances`` (a mapping), as a vehicle file holds them."""
+        """The fields (floats), ``tolerances`` (a mapping) and any ``sensors`` block, as a vehicle
+        file holds them."""
         out: dict[str, Any] = {name: float(getattr(self, name)) for name in FIELD_UNITS}
         out["tolerances"] = self.tolerances.to_dict()
+        if self.sensors is not None:
+            out["sensors"] = self.sensors.to_dict()
         return out
 
 
@@ -102,7 +144,10 @@ _RULES = (
     HEIGHTS_RULE,
     ("cog_from_front_axle_m", lambda v: 0.0 < v.cog_from_front_axle_m < v.wheelbase_m,
      "must lie between the axles (0 < lf < wheelbase_m)"),
-    ("sensor_rear_offset_m", lambda v: v.sensor_x_m[1] - v.sensor_x_m[0] >= 0.25 * v.wheelbase_m,
+    ("sensors", lambda v: v.sensors is None or (isinstance(v.sensors, SensorSet) and bool(v.channels)),
+     "must be a sensors block the half car can use (rozyn_estimator.sensors)"),
+    ("sensor_rear_offset_m",
+     lambda v: v.pitch_gyro or v.sensor_x_m[1] - v.sensor_x_m[0] >= 0.25 * v.wheelbase_m,
      "the rear accelerometer must sit at least a quarter wheelbase behind the front one to see pitch "
      "(sensor_front_offset_m is measured from the front axle, sensor_rear_offset_m from the rear one)"),
 )
@@ -117,6 +162,9 @@ def vehicle_from_mapping(data: Mapping[str, Any], *, source: str = "vehicle") ->
     if not isinstance(data, Mapping):
         raise ConfigError(f"{source}: expected a mapping of vehicle parameters, got {type(data).__name__}")
     values = dict(data)
+    sensors = sensors_from_mapping(values.pop("sensors"), source) if "sensors" in values else None
+    offsets = {k: values.pop(k) for k in ("sensor_front_offset_m", "sensor_rear_offset_m")
+               if sensors is not None and k in values}  # the block places them (a written file's agree)
     model = values.pop("model", "half")  # a full car's file says model: full (rozyn_estimator.vehicle_full)
     if model != "half":
         raise ConfigError(f"{source}: model: a half-car vehicle has model half, got {one_line(repr(model))} "
@@ -130,7 +178,14 @@ def vehicle_from_mapping(data: Mapping[str, Any], *, source: str = "vehicle") ->
     try:
         if "tolerances" in values:
             values["tolerances"] = Tolerances.from_mapping(values["tolerances"], source)
-        return Vehicle(**values)
+        vehicle = Vehicle(**values)
+        if sensors is None:
+            return vehicle
+        placed = vehicle.with_sensors(sensors)
+        if any(not abs(float(v) - getattr(placed, k)) <= 1e-9 for k, v in offsets.items()):
+            raise ConfigError(f"{source}: give the sensors' positions in the sensors block or as "
+                              "sensor_front_offset_m/sensor_rear_offset_m, not both")
+        return placed
     except ConfigError as exc:
         raise ConfigError(one_line(str(exc) if str(exc).startswith(source) else f"{source}: {exc}")) from None
 
@@ -271,7 +326,7 @@ def _vehicle_section(data: Any, source: str) -> Any:
     """Find the vehicle mapping in a flat file or a ROS 2 params file."""
     if data is None:
         return {}
-    if isinstance(data, Mapping) and not (set(data) & {*FIELD_UNITS, "tolerances"}):
+    if isinstance(data, Mapping) and not (set(data) & {*FIELD_UNITS, "tolerances", "sensors"}):
         for node in data.values():
             params = node.get("ros__parameters") if isinstance(node, Mapping) else None
             if isinstance(params, Mapping) and isinstance(params.get("vehicle"), Mapping):
@@ -286,7 +341,10 @@ def dump_vehicle(v: Vehicle) -> str:
     lines = [f"{k}: {getattr(v, k)!r}  # {unit}" for k, unit in FIELD_UNITS.items()]
     lines.append("tolerances:  # standard uncertainties: shares of the values, or m, or s")
     lines += [f"  {k}: {value!r}" for k, value in v.tolerances.to_dict().items()]
-    return "\n".join(lines) + "\n"
+    text = "\n".join(lines) + "\n"
+    if v.sensors is not None:
+        text += yaml.safe_dump({"sensors": v.sensors.to_dict()}, sort_keys=False)
+    return text
 
 
 

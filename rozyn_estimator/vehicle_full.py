@@ -245,7 +245,7 @@ def centreline_half_car(v: FullVehicle) -> Vehicle:
     )
 
 
-def _axle_fields(pattern: str, values: tuple[float, float]) -> dict[str, float]:
+def _axle_fields(pattern: str, values: tuple[float, float]) -> dict[str, Any]:
     return {pattern.format("front"): values[0], pattern.format("rear"): values[1]}
 
 
@@ -258,6 +258,10 @@ def full_vehicle_from_mapping(data: Mapping[str, Any], *, source: str = "vehicle
     if model != "full":
         raise ConfigError(f"{source}: model: expected full for a full-car vehicle, got "
                           f"{one_line(repr(model))}")
+    if "sensors" in values:
+        raise ConfigError(f"{source}: sensors: the full car reads its four corner accelerometers "
+                          "(sensor_x_m, sensor_y_m and the corner topics); a sensors block (an IMU) is the "
+                          "half car's so far")
     unknown = sorted(str(k) for k in set(values) - {*FULL_FIELD_UNITS, "tolerances"})
     if unknown:
         raise ConfigError(f"{source}: unknown full-car vehicle parameter(s) {_listed(unknown)}; known: "

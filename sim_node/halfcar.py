@@ -21,6 +21,7 @@ import numpy as np
 
 from rozyn_estimator.body_model import HALF_DOF as N_DOF
 from rozyn_estimator.body_model import half_car_model as second_order_model
+from rozyn_estimator.body_model import half_car_sensor_rates as sensor_rates
 from rozyn_estimator.body_model import half_car_sensor_rows as sensor_rows
 from rozyn_estimator.body_model import half_car_suspension_rows as suspension_rows
 from rozyn_estimator.vehicle import Vehicle
@@ -33,7 +34,7 @@ N_STATE = 2 * N_DOF
 
 def state_space(v: Vehicle) -> StateSpace:
     """Continuous state space of the half car with road displacement as input."""
-    return state_space_of(second_order_model(v), sensor_rows(v))
+    return state_space_of(second_order_model(v), sensor_rows(v), sensor_rates(v))
 
 
 def static_state(v: Vehicle, road_m: np.ndarray) -> np.ndarray:
@@ -65,11 +66,12 @@ class HalfCarPlant(SuspendedPlant):
     ) -> None:
         self.vehicle = vehicle
         super().__init__(second_order_model(vehicle), sensor_rows(vehicle), suspension_rows(vehicle), dt_s,
-                         x0=x0, u0=u0, suspension=suspension, delays_s=delays_s, what="half-car")
+                         x0=x0, u0=u0, suspension=suspension, delays_s=delays_s, what="half-car",
+                         rates=sensor_rates(vehicle))
 
 
 def free_decay(vehicle: Vehicle, x0: np.ndarray, dt_s: float, n: int) -> np.ndarray:
-    """Sensor accelerations of the free decay from state ``x0`` on a flat road."""
+    """What the sensors read (accelerations; a gyro's rate) in the free decay from ``x0`` on a flat road."""
     return HalfCarPlant(vehicle, dt_s, x0=x0).run(np.zeros((n, 2)))
 
 
@@ -79,4 +81,4 @@ def natural_modes(v: Vehicle) -> tuple[np.ndarray, np.ndarray]:
 
 
 __all__ = ["N_DOF", "N_STATE", "HalfCarPlant", "free_decay", "natural_modes", "second_order_model",
-           "sensor_rows", "state_space", "static_state", "suspension_rows"]
+           "sensor_rates", "sensor_rows", "state_space", "static_state", "suspension_rows"]

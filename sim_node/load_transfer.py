@@ -47,18 +47,21 @@ class LoadTransfer:
         dt_s: the plant's step [s].
         accel0_mps2: the acceleration at the first step: the body starts at rest under it.
         delays_s: each sensor's delay (as the road's plant).
+        rates: (sensors,) bool: these read their row's rate (a gyro), with no direct term.
     """
 
     def __init__(self, model: SecondOrderModel, body_rows: np.ndarray, corners: np.ndarray, pitch: int,
                  mass_kg: float, cog_height_m: float, dt_s: float, accel0_mps2: float,
-                 delays_s: Sequence[float] = ()) -> None:
+                 delays_s: Sequence[float] = (), rates: np.ndarray | None = None) -> None:
         driven = pitch_moment_model(model, pitch, mass_kg, cog_height_m)
         # the plant's outputs read the body's states only (a road acts through the wheels); a
         # moment on the body also accelerates it directly, at once: M⁻¹ f a_x at the sensors
         self._direct = body_rows @ np.linalg.solve(driven.mass, driven.tyre_stiffness[:, 0])
+        if rates is not None:
+            self._direct[rates] = 0.0
         u0 = np.array([accel0_mps2])
         self._plant = SuspendedPlant(driven, body_rows, corners, dt_s, x0=static_state_of(driven, u0), u0=u0,
-                                     delays_s=delays_s, what="load transfer")
+                                     delays_s=delays_s, what="load transfer", rates=rates)
 
     def run(self, accel_mps2: np.ndarray) -> np.ndarray:
         """(n, sensors) body acceleration from the load transfer at steps of longitudinal

@@ -37,9 +37,10 @@ class StateSpace:
     shift: np.ndarray  # (2 dof, inputs)
 
 
-def state_space_of(m: SecondOrderModel, body_rows: np.ndarray) -> StateSpace:
+def state_space_of(m: SecondOrderModel, body_rows: np.ndarray, rates: np.ndarray | None = None) -> StateSpace:
     """Continuous state space with road displacement as input and, as outputs, the
-    accelerations ``body_rows @ q''`` (rows that read the body only, no wheel)."""
+    accelerations ``body_rows @ q''`` (rows that read the body only, no wheel); where
+    ``rates`` is set, the rates ``body_rows @ q'`` instead (a gyro)."""
     n = m.dof
     minv_k = solve(m.mass, m.stiffness, assume_a="diagonal")
     minv_c = solve(m.mass, m.damping, assume_a="diagonal")
@@ -48,6 +49,8 @@ def state_space_of(m: SecondOrderModel, body_rows: np.ndarray) -> StateSpace:
     b0 = np.vstack([np.zeros((n, tyres)), solve(m.mass, m.tyre_stiffness, assume_a="diagonal")])
     b1 = np.vstack([np.zeros((n, tyres)), solve(m.mass, m.tyre_damping, assume_a="diagonal")])
     c = body_rows @ a[n:, :]  # body rows carry no direct road input
+    if rates is not None and np.any(rates):  # q' is the state's second half
+        c[rates] = np.hstack([np.zeros_like(body_rows[rates]), body_rows[rates]])
     return StateSpace(a=a, b=a @ b1 + b0, c=c, d=c @ b1, shift=b1)
 
 

@@ -33,8 +33,9 @@ from sensor_msgs.msg import Imu
 
 from rozyn_estimator.parameters import build, check, param
 from rozyn_estimator.ros import glue as ros_common
+from rozyn_estimator.sensors import CHANNEL_FIELDS
 from rozyn_estimator.vehicle_full import FullVehicle, any_vehicle_from_parameters
-from sim_node.sensors import MEMS_NOISE_MPS2
+from sim_node.sensors import MEMS_GYRO_BIAS_RADPS, MEMS_GYRO_NOISE_RADPS, MEMS_NOISE_MPS2
 from sim_node.simulation import SimConfig, Simulation
 
 NS = 1_000_000_000
@@ -90,7 +91,8 @@ class SimNodeOptions:
 
 # the node's defaults: SimConfig's, with seed 1 and a MEMS accelerometer's noise (SimConfig's own
 # default is exact sensors, for the studies of the method)
-NODE_DEFAULTS = SimConfig(seed=1, noise_std_mps2=MEMS_NOISE_MPS2)
+NODE_DEFAULTS = SimConfig(seed=1, noise_std_mps2=MEMS_NOISE_MPS2, gyro_noise_std_radps=MEMS_GYRO_NOISE_RADPS,
+                          gyro_bias_radps=MEMS_GYRO_BIAS_RADPS)
 
 
 def _time(ns: int) -> Time:
@@ -138,9 +140,8 @@ class SimNode(Node):
         sensor_qos = QoSProfile(depth=o.qos_depth, reliability=ReliabilityPolicy.BEST_EFFORT)
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        channels = self.config.channels  # front, rear; or the full car's corners
-        self._pub = [self.create_publisher(Imu, getattr(o, f"{c}_topic"), sensor_qos) for c in channels]
-        self._msgs = [self._imu_template(getattr(o, f"{c}_frame_id")) for c in channels]
+        self._outlets = self._sensor_outlets(sensor_qos)
+        self._pub = [pub for pub, _, _ in self._outlets]
         self._pub_speed = self.create_publisher(TwistStamped, "sim/speed", 10)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._pub_truth = self.create_publisher(InertiaStamped, "sim/ground_truth", latched)
@@ -166,11 +167,37 @@ class SimNode(Node):
             f"at {c.speed_kmh:g} km/h"
         self.get_logger().info(f"simulating {road} {speed}, {c.rate_hz:g} Hz, {pace}")
 
-    def _imu_template(self, frame_id: str) -> Imu:
+    def _sensor_outlets(self, qos: QoSProfile) -> list[tuple[Any, Imu, list[tuple[int, str, str]]]]:
+        """(publisher, message, [(block column, sub-message, field)]) per sensor: one accelerometer
+        per channel (front, rear; the full car's corners), or each sensor of the vehicle's
+        sensors block with all its channels in one message (an IMU's accel_z and gyro_y)."""
+        o, cfg = self.options, self.config
+        if cfg.model == "full" or cfg.vehicle.sensors is None:
+            return [(self.create_publisher(Imu, getattr(o, f"{c}_topic"), qos),
+                     self._imu_template(getattr(o, f"{c}_frame_id"), gyro=False),
+                     [(k, "linear_acceleration", "z")]) for k, c in enumerate(cfg.channels)]
+        labels = cfg.channels
+        outlets: list[tuple[Any, Imu, list[tuple[int, str, str]]]] = []
+        for sensor in cfg.vehicle.sensors.sensors:
+            columns = []
+            for kind in sensor.channels:
+                if f"{sensor.name}.{kind}" in labels:
+                    part, axis = CHANNEL_FIELDS[kind].split(".")
+                    columns.append((labels.index(f"{sensor.name}.{kind}"), part, axis))
+            gyro = any(kind != "accel_z" for kind in sensor.channels)
+            outlets.append((self.create_publisher(Imu, sensor.topic, qos),
+                            self._imu_template(f"{sensor.name}_link", gyro), columns))
+        return outlets
+
+    def _imu_template(self, frame_id: str, gyro: bool) -> Imu:
         msg = Imu()
         msg.header.frame_id = frame_id
         msg.orientation_covariance[0] = -1.0  # not provided
-        msg.angular_velocity_covariance[0] = -1.0
+        if gyro:  # REP 145: the rates' noise; without a gyro, marked not provided
+            rate = self.config.gyro_noise_std_radps**2
+            msg.angular_velocity_covariance = [rate, 0.0, 0.0, 0.0, rate, 0.0, 0.0, 0.0, rate]
+        else:
+            msg.angular_velocity_covariance[0] = -1.0
         var = self.config.noise_std_mps2**2
         msg.linear_acceleration_covariance = [var, 0.0, 0.0, 0.0, var, 0.0, 0.0, 0.0, var]
         return msg
@@ -233,12 +260,12 @@ class SimNode(Node):
         stamps = [self._epoch_ns + round(t * NS) for t in block.t_s]
         if self._pub_clock is not None:
             self._pub_clock.publish(ClockMsg(clock=_time(stamps[-1])))
-        pairs = list(zip(self._pub, self._msgs, strict=True))
         for stamp, row in zip(stamps, block.accel_mps2.tolist(), strict=True):
             t = _time(stamp)
-            for (pub, msg), a in zip(pairs, row, strict=True):
+            for pub, msg, columns in self._outlets:
                 msg.header.stamp = t
-                msg.linear_acceleration.z = a
+                for k, part, axis in columns:
+                    setattr(getattr(msg, part), axis, row[k])
                 pub.publish(msg)
         self.published += n
         speed = TwistStamped()

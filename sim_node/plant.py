@@ -48,17 +48,20 @@ NOT_CONVERGED = ("departures: the nonlinear suspension did not converge; use a d
 
 
 def with_tension_inputs(ss: StateSpace, model: SecondOrderModel, corners: np.ndarray,
-                        body_rows: np.ndarray) -> StateSpace:
+                        body_rows: np.ndarray, rates: np.ndarray | None = None) -> StateSpace:
     """``ss`` with the corners' extra suspension tensions [N] as more inputs, after the road's.
 
     A tension ``f`` pulls body and wheel together: generalised force ``-G^T f`` (eq 3-3's
     right-hand side, ``G = corners``), no derivative input, and a direct path to the body's
-    accelerations (``body_rows @ q''``).
+    accelerations (``body_rows @ q''``; none to a rate, a gyro's: ``rates``).
     """
     n, k = model.dof, corners.shape[0]
     accel = -solve(model.mass, corners.T, assume_a="diagonal")  # (dof, corners) q'' per newton
     b = np.vstack([np.zeros((n, k)), accel])
-    return StateSpace(a=ss.a, b=np.hstack([ss.b, b]), c=ss.c, d=np.hstack([ss.d, body_rows @ accel]),
+    direct = body_rows @ accel
+    if rates is not None:
+        direct[rates] = 0.0
+    return StateSpace(a=ss.a, b=np.hstack([ss.b, b]), c=ss.c, d=np.hstack([ss.d, direct]),
                       shift=np.hstack([ss.shift, np.zeros((2 * n, k))]))
 
 
@@ -68,6 +71,7 @@ class SuspendedPlant:
     Args:
         model: the second-order model (road displacement under each tyre in).
         body_rows: (outputs, dof) rows reading the body's acceleration at the sensors.
+        rates: (outputs,) bool: these outputs read their row's rate instead (a gyro; None: none).
         corners: (corners, dof) the suspension's extension rows ``G``.
         dt_s: simulation step [s]; the road is piecewise linear between steps.
         x0: initial physical state ``[q, q']`` (default: at rest, zero road).
@@ -82,7 +86,7 @@ class SuspendedPlant:
     def __init__(self, model: SecondOrderModel, body_rows: np.ndarray, corners: np.ndarray, dt_s: float,
                  x0: np.ndarray | None = None, u0: np.ndarray | None = None,
                  suspension: SuspensionLaw | None = None, delays_s: Sequence[float] = (),
-                 what: str = "plant") -> None:
+                 what: str = "plant", rates: np.ndarray | None = None) -> None:
         if not dt_s > 0.0:
             raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
         if not all(d >= 0.0 for d in delays_s):
@@ -90,9 +94,9 @@ class SuspendedPlant:
         self.dt_s = float(dt_s)
         self.n_road = model.tyre_stiffness.shape[1]
         n_state = 2 * model.dof
-        ss = state_space_of(model, body_rows)
+        ss = state_space_of(model, body_rows, rates)
         if suspension is not None:
-            ss = with_tension_inputs(ss, model, corners, body_rows)
+            ss = with_tension_inputs(ss, model, corners, body_rows, rates)
         self._modal = p = ModalPropagator(ss, self.dt_s, what)
         x0 = np.zeros(n_state) if x0 is None else np.asarray(x0, dtype=float)
         u0 = np.zeros(self.n_road) if u0 is None else np.asarray(u0, dtype=float)

@@ -31,6 +31,11 @@ LOWPASS_ORDER = 2
 # at 100 Hz behind a ~40 Hz low-pass reads as 400e-6 g √40 ≈ 0.025 m/s² rms (7 % of the body's
 # vertical acceleration on an ISO A road at 100 km/h; automotive IMUs are within a factor of 2).
 MEMS_NOISE_MPS2 = 0.025
+# The same part's gyro: 0.005 °/s/√Hz behind the same ~40 Hz low-pass reads 0.005 √40 ≈ 0.032 °/s
+# ≈ 5.5e-4 rad/s rms (3 % of the pitch rate on an ISO A road at 100 km/h); a bias of 0.5 °/s
+# after the unit's calibration (the estimator removes each window's mean).
+MEMS_GYRO_NOISE_RADPS = 5.5e-4
+MEMS_GYRO_BIAS_RADPS = 0.0087
 
 
 class Accelerometers:
@@ -42,10 +47,11 @@ class Accelerometers:
         bias_mps2: constant offsets, one per channel (front, rear).
         include_gravity: add +g to the specific force (REP 145).
         full_car: the full car's four sensors (FL, FR, RL, RR), else the half car's two.
+        gyros: (channels,) bool: these channels are gyros (rates, no gravity; None: none).
     """
 
     def __init__(self, departures: Departures, plant_rate_hz: float, bias_mps2: tuple[float, ...],
-                 include_gravity: bool, full_car: bool = False) -> None:
+                 include_gravity: bool, full_car: bool = False, gyros: np.ndarray | None = None) -> None:
         self._sos = None
         if departures.lowpass_hz > 0.0:
             self._sos = butter(LOWPASS_ORDER, departures.lowpass_hz, fs=plant_rate_hz, output="sos")
@@ -53,7 +59,9 @@ class Accelerometers:
         gains = departures.corner_gains if full_car else departures.gains
         self._gains = None if gains is None else np.asarray(gains)
         self._bias = np.asarray(bias_mps2, dtype=float)
-        self._gravity = GRAVITY_MPS2 if include_gravity else 0.0
+        self._gravity: float | np.ndarray = GRAVITY_MPS2 if include_gravity else 0.0
+        if include_gravity and gyros is not None and np.any(gyros):  # a gyro reads no gravity
+            self._gravity = np.where(gyros, 0.0, GRAVITY_MPS2)
 
     def lowpass(self, accel_mps2: np.ndarray) -> np.ndarray:
         """The IMU low-pass over (n, channels) accelerations at the plant's rate (continuing)."""
@@ -68,8 +76,9 @@ class Accelerometers:
         """(n, channels) sampled body accelerations -> what the sensors read (before noise)."""
         if self._gains is None:  # today's operations, so runs without departures stay bit for bit
             accel = accel_mps2 + self._bias
-            return accel + self._gravity if self._gravity else accel
+            return accel + self._gravity if np.any(self._gravity) else accel
         return self._gains * (accel_mps2 + self._gravity) + self._bias
 
 
-__all__ = ["GRAVITY_MPS2", "Accelerometers"]
+__all__ = ["GRAVITY_MPS2", "MEMS_GYRO_BIAS_RADPS", "MEMS_GYRO_NOISE_RADPS", "MEMS_NOISE_MPS2",
+           "Accelerometers"]

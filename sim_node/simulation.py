@@ -79,6 +79,10 @@ class SimConfig:
                                         "from this", unit="Hz", low=0.0, open_low=True, ros_name="")
     noise_std_mps2: float = param(0.0, "white sensor noise per channel", unit="m/s^2", low=0.0, high=100.0,
                                   read_only=True)
+    gyro_noise_std_radps: float = param(0.0, "white noise of a gyro channel (a vehicle's sensors block)",
+                                        unit="rad/s", low=0.0, high=10.0, read_only=True)
+    gyro_bias_radps: float = param(0.0, "constant offset of a gyro channel", unit="rad/s", low=-10.0,
+                                   high=10.0, read_only=True)
     bias_mps2: tuple[float, float] = param((0.0, 0.0), "constant sensor offsets (front, rear)", unit="m/s^2",
                                            length=2, ros_name="")
     include_gravity: bool = param(True, "REP 145: a level accelerometer at rest reads +g", ros_name="")
@@ -154,8 +158,18 @@ class SimConfig:
 
     @property
     def channels(self) -> tuple[str, ...]:
-        """The accelerometers, in the order of a block's columns."""
-        return CORNERS if self.model == "full" else HALF_CHANNELS
+        """The channels, in the order of a block's columns: the accelerometers, or a sensors
+        block's channels (``imu.accel_z``, ``imu.gyro_y``)."""
+        if self.model == "full":
+            return CORNERS
+        return HALF_CHANNELS if self.vehicle.sensors is None else self.vehicle.channel_names
+
+    @property
+    def gyros(self) -> np.ndarray:
+        """(channels,) bool: which channels are gyros."""
+        if self.model == "full" or self.vehicle.sensors is None:
+            return np.zeros(len(self.channels), dtype=bool)
+        return np.array([c.kind != "accel_z" for c in self.vehicle.channels])
 
     @property
     def n_state(self) -> int:
@@ -203,9 +217,12 @@ class Simulation:
         self._change_step = round(cfg.load_change_at_s / self._dt) if cfg.load_change_kg else None
         u0 = self._road_at(np.array([self._step]))[0]
         self._build_plants(vehicle, self._initial_state(u0), u0)
-        bias = (0.0,) * len(CORNERS) if isinstance(vehicle, FullVehicle) else cfg.bias_mps2
+        gyros = cfg.gyros
+        bias = (0.0,) * len(CORNERS) if isinstance(vehicle, FullVehicle) else \
+            tuple(np.where(gyros, cfg.gyro_bias_radps, cfg.bias_mps2))
         self.sensors = Accelerometers(cfg.departures, 1.0 / self._dt, bias, cfg.include_gravity,
-                                      full_car=isinstance(vehicle, FullVehicle))
+                                      full_car=isinstance(vehicle, FullVehicle), gyros=gyros)
+        self._noise_std = np.where(gyros, cfg.gyro_noise_std_radps, cfg.noise_std_mps2)
         if self._step < 0:
             self._advance(-self._step)
 
@@ -217,7 +234,7 @@ class Simulation:
             self.plant = fullcar.FullCarPlant(vehicle, self._dt, x0=x0, u0=u0,
                                               suspension=cfg.departures.suspension(vehicle),
                                               delays_s=cfg.departures.corner_delays_s)
-        else:
+        else:  # a load change keeps the sensors: the loaded vehicle is built on the configured one
             self.plant = HalfCarPlant(vehicle, self._dt, x0=x0, u0=u0,
                                       suspension=cfg.departures.suspension(vehicle),
                                       delays_s=cfg.departures.delays_s)
@@ -247,7 +264,7 @@ class Simulation:
             model, rows, pitch = halfcar.second_order_model(vehicle), halfcar.sensor_rows(vehicle), 3
             corners, delays = halfcar.suspension_rows(vehicle), cfg.departures.delays_s
         return LoadTransfer(model, rows, corners, pitch, vehicle.sprung_mass_kg, vehicle.cog_height_m,
-                            self._dt, accel0, delays)
+                            self._dt, accel0, delays, rates=cfg.gyros)
 
     def _initial_state(self, u0: np.ndarray) -> np.ndarray:
         """The plant's start: ``initial_state``, the thesis' free decay on a flat road, else at rest."""
@@ -333,8 +350,8 @@ class Simulation:
             raise ValueError(f"n must be >= 0, got {n}")
         t = self.time_s + np.arange(n) / cfg.rate_hz
         accel = self.sensors.read(self._advance(n * cfg.oversample)[:: cfg.oversample])
-        if cfg.noise_std_mps2 > 0:
-            accel = accel + cfg.noise_std_mps2 * self._noise.standard_normal((n, len(cfg.channels)))
+        if np.any(self._noise_std > 0):
+            accel = accel + self._noise_std * self._noise.standard_normal((n, len(cfg.channels)))
         return SimBlock(t_s=t, accel_mps2=accel, speed_mps=self.speed_at(t), channels=cfg.channels)
 
     def run(self, duration_s: float) -> SimBlock:

@@ -95,6 +95,35 @@ def test_sim_and_estimator_in_one_process(ros):
     assert {"mode1_freq_hz", "mode2_damping", "window_fill_pct", "pipeline_ms", "speed_mps"} <= set(values)
 
 
+def test_one_imu_through_both_nodes(ros, tmp_path):
+    """A vehicle file whose sensors block is one IMU: the sim publishes complete Imu messages on
+    its topic, the estimator reads both channels of it and estimates."""
+    path = tmp_path / "imu_car.yaml"
+    path.write_text("vehicle:\n  sensors:\n    names: [imu]\n    imu: {topic: /imu/data, x_m: 1.5, "
+                    "channels: [accel_z, gyro_y]}\n")
+    got = collect(ros.probe)
+    imu: list[Imu] = []
+    ros.probe.create_subscription(Imu, "/imu/data", imu.append, qos_profile_sensor_data)
+    sim = ros.add(SimNode(context=ros.context, parameter_overrides=[
+        Parameter("time_mode", value="sim"), Parameter("real_time_factor", value=20.0),
+        Parameter("duration_s", value=130.0), Parameter("wait_for_subscribers", value=True),
+        Parameter("vehicle_file", value=str(path))]))
+    ros.add(EstimatorNode(context=ros.context, parameter_overrides=[
+        Parameter("use_sim_time", value=True), Parameter("speed_topic", value="sim/speed"),
+        Parameter("vehicle_file", value=str(path))]))
+    assert ros.spin_until(lambda: sim.finished, 50.0)
+    ros.spin_until(lambda: got["inertia"] and got["inertia"][-1].header.stamp.sec >= 125, 10.0)
+    last = got["inertia"][-1]
+    estimate = np.array([last.inertia.m, last.inertia.iyy, -last.inertia.com.x])
+    assert np.all(np.abs(estimate / [1000.0, 2000.0, 1.2] - 1) < 0.05), estimate
+    msg = imu[-1]
+    assert msg.header.frame_id == "imu_link" and msg.orientation_covariance[0] == -1.0
+    assert msg.angular_velocity_covariance[4] > 0 and msg.linear_acceleration.z > 9.0
+    assert 0.0 < abs(msg.angular_velocity.y) < 1.0 and msg.angular_velocity.x == 0.0
+    names = {kv.key for s in estimator_status(got) for kv in s.values}
+    assert {"samples_imu.accel_z", "samples_imu.gyro_y"} <= names, sorted(names)
+
+
 def test_the_sim_waits_for_as_many_subscribers_as_asked(ros):
     """With a recorder beside the estimator (``subscribers_per_topic`` 2) the sim holds its
     start until every accelerometer topic has both: one subscriber is not enough."""

@@ -34,6 +34,7 @@ from rozyn_estimator.method.drive import constant_speed_only, varying_drive, win
 from rozyn_estimator.method.fit import axle_shapes, characteristic_matrix, fit_inertia
 from rozyn_estimator.method.glitches import GlitchError, gate_glitches
 from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
+from rozyn_estimator.method.imu import stage_input, stage_vehicle
 from rozyn_estimator.method.likelihood import Refinement, refine
 from rozyn_estimator.method.load_transfer import carries_load_transfer, fit_without_load_transfer
 from rozyn_estimator.method.variance import jackknife_covariance
@@ -151,7 +152,7 @@ def estimate(
     speed, profile = window_speed(speed_mps)
     accel = np.asarray(accel_mps2)
     try:
-        y, gated = checked_window(accel, fs_hz, cfg)
+        y, gated = checked_window(accel, fs_hz, cfg, vehicle.channel_names)
     except InputError as exc:
         return _failed(str(exc), int(accel.shape[0]) if accel.ndim >= 1 else 0, started)
     if cfg.refine == "none" and (why := constant_speed_only(profile)):
@@ -187,8 +188,8 @@ def _rozyn_stage(
     y: np.ndarray, fs_hz: float, vehicle: Vehicle, cfg: PipelineConfig, speed_mps: float | None,
     started: float,
 ) -> Estimate:
-    """Rozyn's pipeline on the checked, demeaned window."""
-    n, dt = int(y.shape[0]), 1.0 / fs_hz
+    """Rozyn's pipeline on the checked, demeaned window (an IMU's: :mod:`.imu`)."""
+    (y, vehicle), n, dt = stage_input(y, fs_hz, vehicle), int(y.shape[0]), 1.0 / fs_hz
     try:
         first, last = lag_range(cfg, fs_hz, vehicle, speed_mps)
         if cfg.correlation == "free-decay":
@@ -408,6 +409,7 @@ def _done(
 def _with_budget(rozyn: Estimate, v: Vehicle, cfg: PipelineConfig) -> Estimate:
     """Rozyn's estimate as published: its covariance with the tolerances' contributions (only
     when it is the published one: the refinement, when it succeeds, has its own budget)."""
+    v = stage_vehicle(v)
     tolerances = v.tolerances.absolute(v)
     if not (rozyn.ok and rozyn.params is not None and tolerances):
         return rozyn

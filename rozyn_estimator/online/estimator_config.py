@@ -20,6 +20,7 @@ from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.online.config import OnlineConfig
 from rozyn_estimator.online.records import Layout, layout_of
 from rozyn_estimator.parameters import build, check, param
+from rozyn_estimator.sensors import sensors_from_mapping
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle, any_vehicle_from_parameters
@@ -106,12 +107,23 @@ class EstimatorConfig:
 
     @property
     def sensors(self) -> tuple[tuple[str, str], ...]:
-        """(channel, topic) of each accelerometer in use: the half car's front and rear, or the
-        full car's corners that have a topic (in ``front_left`` … ``rear_right`` order)."""
+        """(channel, topic) of each channel in use: the half car's front and rear (or its
+        vehicle's sensors block's channels, ``imu.accel_z`` …), or the full car's corners that
+        have a topic (in ``front_left`` … ``rear_right`` order)."""
         if self.full_vehicle is None:
+            if self.vehicle.sensors is not None:  # the vehicle's sensors block names its topics
+                return tuple((c.label, c.topic) for c in self.vehicle.channels)
             return (("front", self.front_topic), ("rear", self.rear_topic))
         topics = (self.front_left_topic, self.front_right_topic, self.rear_left_topic, self.rear_right_topic)
         return tuple((c, t) for c, t in zip(CORNERS, topics, strict=True) if t)
+
+    @property
+    def fields(self) -> tuple[str, ...]:
+        """The ``sensor_msgs/Imu`` field each channel of :attr:`sensors` reads: ``field``, or a
+        sensors block's channel's (``linear_acceleration.z``, ``angular_velocity.y``)."""
+        if self.full_vehicle is None and self.vehicle.sensors is not None:
+            return tuple(c.field for c in self.vehicle.channels)
+        return (self.field,) * len(self.sensors)
 
     @classmethod
     def from_parameters(cls, values: Mapping[str, Any]) -> EstimatorConfig:
@@ -133,6 +145,9 @@ class EstimatorConfig:
         data = dataclasses.asdict(self)
         if self.full_vehicle is None:
             del data["full_vehicle"]  # the half car's record as before the full car
+        del data["vehicle"]["sensors"]  # as a vehicle file holds it, where given (as before, where not)
+        if self.vehicle.sensors is not None:
+            data["vehicle"]["sensors"] = self.vehicle.sensors.to_dict()
         return json.dumps(data, sort_keys=True)
 
     @classmethod
@@ -152,7 +167,14 @@ class EstimatorConfig:
             vehicle["tolerances"] = Tolerances.none().to_dict()
         ignored = [] if ignored is None else ignored
         full = data.pop("full_vehicle", None) if isinstance(data, dict) else None
+        sensors = vehicle.pop("sensors", None) if isinstance(vehicle, dict) else None
+        if isinstance(vehicle, dict) and sensors is not None:  # the block places its sensors (an IMU's
+            for key in ("sensor_front_offset_m", "sensor_rear_offset_m"):  # offsets alone are no half car)
+                vehicle.pop(key, None)
         config: EstimatorConfig = _from_dict(cls(), data, "estimator configuration", ignored)
+        if sensors is not None:
+            block = sensors_from_mapping(sensors, "estimator configuration.vehicle")
+            config = config.replace(vehicle=config.vehicle.with_sensors(block))
         if full is None:
             return config
         where = "estimator configuration.full_vehicle"

@@ -7,6 +7,7 @@ rear channels and (m, I_yy, l_f), or the full car's three or four corners and
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
@@ -30,8 +31,9 @@ class Layout:
 
     Attributes:
         params: the estimated parameters, in the order of an estimate and its covariance.
-        channels: the accelerometers, in the order of the online estimator's channels:
-            ``front``, ``rear`` (half car) or three or four of :data:`CORNERS` (full car).
+        channels: the sensors' channels, in the order of the online estimator's: ``front``,
+            ``rear`` (half car; a sensors block's labels, ``imu.accel_z``, ``imu.gyro_y``) or
+            three or four of :data:`CORNERS` (full car).
         modes: the body modes an update identifies.
         positive: the first ``positive`` parameters must be > 0 to publish (the full car's
             lateral CoG may have either sign).
@@ -64,9 +66,10 @@ def layout_of(vehicle: Vehicle | FullVehicle, channels: Sequence[str] | None = N
             four distinct corners for a full car.
     """
     if not isinstance(vehicle, FullVehicle):
-        if channels is not None and tuple(channels) != HALF_CHANNELS:
-            raise ConfigError(f"a half car's channels are front and rear, got {', '.join(channels)}")
-        return HALF_LAYOUT
+        names = vehicle.channel_names  # front and rear, or a sensors block's (imu.accel_z, imu.gyro_y)
+        if channels is not None and tuple(channels) != names:
+            raise ConfigError(f"a half car's channels are {' and '.join(names)}, got {', '.join(channels)}")
+        return HALF_LAYOUT if names == HALF_CHANNELS else dataclasses.replace(HALF_LAYOUT, channels=names)
     corners = CORNERS if channels is None else tuple(channels)
     if len(corners) not in (3, 4) or len(set(corners)) != len(corners) or not set(corners) <= set(CORNERS):
         raise ConfigError(f"a full car needs three or four distinct corners of {', '.join(CORNERS)}, got "

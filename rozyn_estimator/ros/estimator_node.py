@@ -73,13 +73,13 @@ class EstimatorNode(Node):
         self.config = self._config(values)
         cfg = self.config
         self.online = OnlineEstimator.from_config(cfg)
-        self._getter = ros_io.field_getter(cfg.field, Imu)
+        self._getters = [ros_io.field_getter(f, Imu) for f in cfg.fields]  # one per channel
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="rozyn-update")
         self._pending: deque[Future[None]] = deque()  # submitted updates, in due order
         self._publish_lock = threading.Lock()  # the worker publishes, and finish() stops, under it
         self._stopping = False
         self._computing: Job | None = None  # the job the worker is on
-        sensors = cfg.sensors  # (channel, topic) of each accelerometer
+        sensors = cfg.sensors  # (channel, topic) of each channel (an IMU's share a topic)
         self._arrival = [time.monotonic()] * len(sensors)  # when each sensor was last heard (wall clock)
         self.finished = False
         self.updates_published = 0
@@ -87,8 +87,11 @@ class EstimatorNode(Node):
         self.received = [0] * len(sensors)  # Imu messages that reached the callbacks, per sensor
         self.on_update: Callable[[Update], None] | None = None  # called (in the worker) after publishing
         qos = QoSProfile(depth=self.options.qos_depth, reliability=ReliabilityPolicy.BEST_EFFORT)
-        subs = [self.create_subscription(Imu, topic, functools.partial(self._on_imu, k), qos)
-                for k, (_, topic) in enumerate(sensors)]
+        by_topic: dict[str, list[int]] = {}
+        for k, (_, topic) in enumerate(sensors):
+            by_topic.setdefault(topic, []).append(k)
+        for topic, channels in by_topic.items():
+            self.create_subscription(Imu, topic, functools.partial(self._on_imu, channels), qos)
         self._subscribe_speed(qos)
         self.pub_inertia = self.create_publisher(InertiaStamped, INERTIA_TOPIC, 10)
         self.pub_covariance = self.create_publisher(Float64MultiArray, COVARIANCE_TOPIC, 10)
@@ -96,7 +99,7 @@ class EstimatorNode(Node):
         self.create_timer(self.options.diagnostics_period_s, self._publish_health)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.get_logger().info(
-            f"estimating the {cfg.model} car from {', '.join(s.topic_name for s in subs)} ({cfg.field}), "
+            f"estimating the {cfg.model} car from {self._sources()}, "
             f"window {cfg.online.window_s:g} s, update every {cfg.online.update_period_s:g} s"
         )
 
@@ -114,7 +117,8 @@ class EstimatorNode(Node):
     def _config(self, values: dict[str, Any]) -> EstimatorConfig:
         """The node's configuration, its field checked against Imu; ConfigError otherwise."""
         config = EstimatorConfig.from_parameters(values)
-        ros_io.field_getter(config.field, Imu)
+        for f in config.fields:
+            ros_io.field_getter(f, Imu)
         return config
 
     def _on_set_parameters(self, changes: list[Parameter]) -> SetParametersResult:
@@ -139,18 +143,28 @@ class EstimatorNode(Node):
 
         self.create_subscription(msg_type, topic, on_speed, qos)
 
-    def _on_imu(self, channel: int, msg: Imu) -> None:
+    def _sources(self) -> str:
+        """``accel/front, accel/rear (linear_acceleration.z)``, or each channel's topic and field."""
+        cfg = self.config
+        if len(set(cfg.fields)) == 1:
+            return f"{', '.join(t for _, t in cfg.sensors)} ({cfg.fields[0]})"
+        sources = zip(cfg.sensors, cfg.fields, strict=True)
+        return ", ".join(f"{name} ({topic} {f})" for (name, topic), f in sources)
+
+    def _on_imu(self, channels: list[int], msg: Imu) -> None:
         if self._stopping:
             return
-        self.received[channel] += 1
-        try:
-            value = float(self._getter(msg))
-        except (AttributeError, TypeError, ValueError):
-            self.online.drop(channel, f"field {self.config.field} not numeric")
-            return
-        self._arrival[channel] = time.monotonic()
-        for job in self.online.add(channel, ros_io.stamp_ns(msg.header.stamp), value):
-            self._submit(job)
+        stamp_ns = ros_io.stamp_ns(msg.header.stamp)
+        for channel in channels:
+            self.received[channel] += 1
+            try:
+                value = float(self._getters[channel](msg))
+            except (AttributeError, TypeError, ValueError):
+                self.online.drop(channel, f"field {self.config.fields[channel]} not numeric")
+                continue
+            self._arrival[channel] = time.monotonic()
+            for job in self.online.add(channel, stamp_ns, value):
+                self._submit(job)
 
     def _submit(self, job: Job) -> None:
         """Queue an update; of those waiting behind the one computing only the newest is

@@ -10,6 +10,10 @@ import argparse
 from collections.abc import Sequence
 from typing import Any
 
+from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.sensors import Sensor, SensorSet
+from rozyn_estimator.vehicle import Vehicle
+
 
 def add_run_options(p: argparse.ArgumentParser, roads: Sequence[str], amplitudes: str) -> None:
     """Road, speed, duration and rate of simulated runs (``trial`` and ``compare``)."""
@@ -54,8 +58,30 @@ def drive_label(args: argparse.Namespace) -> str:
 
 
 def add_vehicle_option(p: argparse.ArgumentParser) -> None:
-    """``--vehicle FILE.yaml``: the vehicle's parameters (default: the thesis' Table 5-1)."""
+    """``--vehicle FILE.yaml``: the vehicle's parameters (default: the thesis' Table 5-1), and
+    ``--sensors``: where the half car's sensors are."""
     p.add_argument("--vehicle", metavar="FILE.yaml", help="vehicle parameters (default: thesis Table 5-1)")
+    p.add_argument("--sensors", choices=SENSOR_PRESETS, default=None,
+                   help="the half car's sensors: axles, two accelerometers at the vehicle's offsets; imu, "
+                        f"one IMU (accel_z and gyro_y on /imu/data) {IMU_BEHIND_COG_M:g} m behind the CoG "
+                        "(default: the vehicle file's sensors block, else axles)")
+
+
+SENSOR_PRESETS = ("axles", "imu")
+IMU_BEHIND_COG_M = 0.3  # a production car's IMU sits near the CoG (the ESC's or the airbag unit's)
+
+
+def with_sensor_preset(vehicle: Any, preset: str | None) -> Any:
+    """``vehicle`` with ``--sensors``' preset (None: as it is); ConfigError for the full car."""
+    if preset is None:
+        return vehicle
+    if not isinstance(vehicle, Vehicle):
+        raise ConfigError("--sensors: the full car reads its four corner accelerometers; an IMU is the half "
+                          "car's so far")
+    if preset == "axles":
+        return vehicle.with_sensors(None)
+    x = vehicle.cog_from_front_axle_m + IMU_BEHIND_COG_M
+    return vehicle.with_sensors(SensorSet((Sensor("imu", "/imu/data", x, 0.0, ("accel_z", "gyro_y")),)))
 
 
 def add_departure_options(p: argparse.ArgumentParser) -> None:

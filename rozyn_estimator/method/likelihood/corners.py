@@ -75,13 +75,29 @@ def corner_outer(
     return (Q[:, k].transpose(1, 0, 2)[:, :, None, :] * h[:, None]).transpose(0, 3, 1, 2)
 
 
+def sensor_map(x_m: np.ndarray, wheelbase_m: float, pitch_gyro: bool) -> np.ndarray:
+    """P (2, 2): axle motion -> each channel's row: heave at an accelerometer's ``x``; a pitch gyro's
+    pitch ``(x_sf - x_sr) / L`` (its rate: :func:`gyro_factor`)."""
+    P = np.column_stack([1.0 - x_m / wheelbase_m, x_m / wheelbase_m])
+    if pitch_gyro:
+        P[1] = np.array([1.0, -1.0]) / wheelbase_m
+    return P
+
+
+def gyro_factor(omega: np.ndarray) -> np.ndarray:
+    """A pitch gyro's factor on its row of ``iω P x`` (an acceleration): ``gyro_y = -φ' = -φ''/(iω)``
+    (REP 103: positive nose down)."""
+    return np.divide(1j, omega, out=np.zeros(omega.shape, complex), where=omega != 0)
+
+
 def sensor_dg(model: Any, want: set[str], x: list[np.ndarray], g: list[np.ndarray], iw: np.ndarray,
               rear: np.ndarray | None) -> dict[str, list[np.ndarray]]:
     """``∂g_c`` by the sensors' positions, the rear's gain and its delay (those of the model's
     θ in ``want``), per input column ``c``: the sensor rows of ``iω P x``."""
     zero, rows = np.zeros_like(iw), {}
     for a, name in enumerate(("sensor_front_x_m", "sensor_rear_x_m")):
-        if name in model.index and name in want:  # ∂g_a/∂x_a = iω [-1/L, 1/L] x (and the rear factor)
+        if name in model.index and name in want and not (a == 1 and model.pitch_gyro):  # a gyro has no x
+            # ∂g_a/∂x_a = iω [-1/L, 1/L] x (and the rear factor)
             dP = np.array([-1.0, 1.0]) / model.wheelbase_m
             factor = rear if a == 1 and rear is not None else 1.0
             rows[name] = [np.array([iw * (dP @ xc), zero])[:: 1 if a == 0 else -1] * factor for xc in x]

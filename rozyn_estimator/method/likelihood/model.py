@@ -43,7 +43,7 @@ import numpy as np
 from scipy import special
 
 from rozyn_estimator.gravity import gravity_height_m, rotation_inertia_kgm2, rotation_stiffness_nmprad
-from rozyn_estimator.method.likelihood.corners import CORNERS, CornerState, corner_outer, sensor_dg
+from rozyn_estimator.method.likelihood import corners as cn
 from rozyn_estimator.method.likelihood.grid import (
     Reduction,
     diagonal_part,
@@ -63,6 +63,7 @@ from rozyn_estimator.vehicle import Vehicle
 
 # Corner values θ can hold as log scale factors (``ln_<term>_<corner>``), in θ's order:
 # the suspension's stiffness and damping, the tyre's, the unsprung mass.
+CORNERS = cn.CORNERS  # front, rear
 CORNER_TERMS = ("stiffness", "damping", "tyre_stiffness", "tyre_damping", "unsprung_mass")
 _INCOHERENCE_START = 1e-4
 
@@ -147,7 +148,7 @@ class HalfCarSpectrum:
         wanted = set(corner_terms) | ({"stiffness", "damping"} if estimate_suspension else set())
         self.corner_terms = tuple(q for q in CORNER_TERMS if q in wanted)
         first_corner = len(self.names)
-        self.names += [f"ln_{q}_{c}" for q in self.corner_terms for c in CORNERS]
+        self.names += [f"ln_{q}_{c}" for q in self.corner_terms for c in cn.CORNERS]
         self.corner_slice = slice(first_corner, len(self.names))
         if sensor_positions:
             self.names += ["sensor_front_x_m", "sensor_rear_x_m"]
@@ -182,8 +183,8 @@ class HalfCarSpectrum:
         spread = share - np.abs(self.inputs[0][1]) ** 2
         if np.max(spread) > 1e-12:
             self.inputs.append(np.array([np.zeros_like(phi), np.sqrt(np.maximum(spread, 0.0))]))
-        x = np.asarray(v.sensor_x_m)
-        self.sensor_map = np.column_stack([1.0 - x / L, x / L])  # P: axle -> sensor heave
+        self.pitch_gyro = v.pitch_gyro  # the second channel reads -φ' (gyro_y), not an acceleration
+        self.sensor_map = cn.sensor_map(np.asarray(v.sensor_x_m), L, self.pitch_gyro)
         self.ks0 = np.array([v.suspension_stiffness_front_npm, v.suspension_stiffness_rear_npm])
         self.cs0 = np.array([v.suspension_damping_front_nspm, v.suspension_damping_rear_nspm])
         self.kt0 = np.array([v.tyre_stiffness_front_npm, v.tyre_stiffness_rear_npm])
@@ -195,6 +196,8 @@ class HalfCarSpectrum:
         self.w_tyre = self.z_tyre - (w * w)[:, None] * self.mt0  # tyre minus wheel inertia
         ideal = rear_gain == 1.0 and time_offset_s == 0.0
         self.rear_factor = None if ideal else rear_gain * np.exp(-1j * w * time_offset_s)
+        if self.pitch_gyro:  # the gyro's row reads a rate: a factor on it (corners.gyro_factor)
+            self.rear_factor = cn.gyro_factor(w) * (1.0 if self.rear_factor is None else self.rear_factor)
 
     # --- parameters -------------------------------------------------------------------
     def theta(
@@ -310,7 +313,7 @@ class HalfCarSpectrum:
         if "sensor_front_x_m" in self.index:  # the sensors moved by θ's departures
             k = self.index["sensor_front_x_m"]
             x_s = np.asarray(self.vehicle.sensor_x_m) + theta[k: k + 2]
-            P = np.column_stack([1.0 - x_s / self.wheelbase_m, x_s / self.wheelbase_m])
+            P = cn.sensor_map(x_s, self.wheelbase_m, self.pitch_gyro)
         iw = 1j * w
         Q = iw * np.einsum("ab,bcf->acf", P, H)  # iω P H
         exponent = ((2.0 - theta[self.index["waviness"]]) if self.estimate_waviness else 0.0) * self.log_shape
@@ -350,13 +353,14 @@ class HalfCarSpectrum:
         for name, basis in zip(self.names[self.shape_slice], self.shape_basis, strict=True):
             if name in want:
                 road[name] = self._fold(gg, weight * basis)
-        corner_rows = [(q, k) for q in self.corner_terms for k in range(2) if f"ln_{q}_{CORNERS[k]}" in want]
+        corner_rows = [(q, k) for q in self.corner_terms for k in range(2)
+                       if f"ln_{q}_{cn.CORNERS[k]}" in want]
         if corner_rows:  # the corner values' rows, as one stack (likelihood/corners.py)
-            state = CornerState(ks, cs, kt, ct, mt, zs, zt, wt, den)
-            outer = corner_outer(state, corner_rows, w, Q, np.stack(self.inputs), np.stack(x), np.stack(g))
+            state = cn.CornerState(ks, cs, kt, ct, mt, zs, zt, wt, den)
+            outer = cn.corner_outer(state, corner_rows, w, Q, np.stack(self.inputs), np.stack(x), np.stack(g))
             stacked = hermitian_part(self._fold(outer, weight))
-            road |= {f"ln_{q}_{CORNERS[k]}": m for (q, k), m in zip(corner_rows, stacked, strict=True)}
-        for name, dg in sensor_dg(self, want, x, g, iw, rear).items():
+            road |= {f"ln_{q}_{cn.CORNERS[k]}": m for (q, k), m in zip(corner_rows, stacked, strict=True)}
+        for name, dg in cn.sensor_dg(self, want, x, g, iw, rear).items():
             road[name] = hermitian_part(self._outer_sum(dg, g, weight))
         out = list(self.names) if rows is None else list(rows)
         at = {name: i for i, name in enumerate(out)}

@@ -242,12 +242,16 @@ def replay_reader(
         BagError: a topic is missing or empty, or the bag is damaged.
         ConfigError: a field is missing or not numeric, or a speed topic of another type.
     """
-    topics = [absolute_topic(t) for _, t in config.sensors]
+    channels: dict[str, list[int]] = {}  # topic -> its channels (an IMU's topic holds several)
+    for k, (_, t) in enumerate(config.sensors):
+        channels.setdefault(absolute_topic(t), []).append(k)
+    topics = list(channels)
     infos = [reader.topic(t) for t in topics]
     for info in infos:
         if info.count == 0:
             raise BagError(f"{reader.path}: topic {info.name} holds no messages")
-    accel = [_field_reader(reader, info, [config.field]) for info in infos]
+    accel = [(_field_reader(reader, info, [config.fields[k] for k in chans]), tuple(chans))
+             for info, chans in zip(infos, channels.values(), strict=True)]
     speed = None
     if config.speed_topic:
         info = reader.topic(config.speed_topic)
@@ -289,7 +293,7 @@ def replay_reader(
                 if result.span_ns is not None:
                     first, last = min(first, result.span_ns[0]), max(last, result.span_ns[1])
                 result.span_ns = (first, last)
-            result.accel_messages += a_idx.size
+            result.accel_messages += np.unique(a_idx).size if len(accel) < len(config.sensors) else a_idx.size
             result.speed_messages += s_idx.size
             t_feed = time.perf_counter()
             result.feed_s += t_feed - started
@@ -312,27 +316,29 @@ def replay_reader(
 
 
 def _accelerations(
-    batch: RawBatch, readers: list[FieldReader]
+    batch: RawBatch, readers: list[tuple[FieldReader, tuple[int, ...]]]
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Positions in the batch, channels (topic k: channel k), stamps [ns] and values of the
-    accelerometer topics 0 … k - 1; and per channel (then speed: 0) the messages that could not
-    be decoded, left out.
+    """Positions in the batch, channels, stamps [ns] and values of the sensor topics 0 … k - 1
+    (topic k's reader reads the fields of its channels, one each); and per channel (then
+    speed: 0) the messages that could not be decoded, left out. A message with several
+    channels gives a sample of each at its position, in the channels' order.
 
     The stamp is the header's, or the bag time for a type without a header.
     """
-    idx = np.flatnonzero(batch.topic < len(readers))
-    chan = batch.topic[idx].astype(np.int64)
-    stamps = np.empty(idx.size, np.int64)
-    values = np.empty(idx.size)
-    ok = np.empty(idx.size, bool)
-    for c, reader in enumerate(readers):
-        sel = chan == c
-        decoded = reader.decode(batch.messages.take(idx[sel]))
-        stamps[sel] = batch.log_ns[idx[sel]] if decoded.stamps is None else decoded.stamps
-        values[sel] = decoded.values[:, 0]
-        ok[sel] = decoded.ok
-    lost = np.array([*(np.sum(~ok & (chan == c)) for c in range(len(readers))), 0])
-    return idx[ok], chan[ok], stamps[ok], values[ok], lost
+    n_channels = sum(len(chans) for _, chans in readers)
+    lost = np.zeros(n_channels + 1, np.int64)
+    parts: list[tuple[np.ndarray, ...]] = []
+    for t, (reader, chans) in enumerate(readers):
+        idx = np.flatnonzero(batch.topic == t)
+        decoded = reader.decode(batch.messages.take(idx))
+        ok = decoded.ok
+        stamps = (batch.log_ns[idx] if decoded.stamps is None else decoded.stamps)[ok]
+        for j, c in enumerate(chans):
+            parts.append((idx[ok], np.full(int(ok.sum()), c, np.int64), stamps, decoded.values[ok, j]))
+            lost[c] = int(np.sum(~ok))
+    idx, chan, stamps, values = (np.concatenate(p) for p in zip(*parts, strict=True))
+    order = np.argsort(idx, kind="stable")  # the bag's order; a message's channels in theirs
+    return idx[order], chan[order], stamps[order].astype(np.int64), values[order].astype(float), lost
 
 
 def _speeds(batch: RawBatch, reader: FieldReader | None,

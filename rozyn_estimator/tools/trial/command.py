@@ -23,13 +23,14 @@ from rozyn_estimator.tools.options import (
     add_vehicle_option,
     departure_values,
     vehicle_error_values,
+    with_sensor_preset,
 )
 from rozyn_estimator.tools.trial.drives import run_drive_args
 from rozyn_estimator.tools.trial.report import format_trials
 from rozyn_estimator.tools.trial.run import parallel_map, parse_seeds, run_trials
 from rozyn_estimator.tools.trial.spec import TRIAL_ROADS, TrialSpec
 from sim_node.departures import Departures
-from sim_node.sensors import MEMS_NOISE_MPS2
+from sim_node.sensors import MEMS_GYRO_NOISE_RADPS, MEMS_NOISE_MPS2
 
 HELP = "simulate seeded runs and estimate from each"
 DESCRIPTION = ("Simulate the half car (or with --model full the full car) over seeded roads and run the "
@@ -43,6 +44,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "accelerometer's; 0 with --noise-fraction or a free decay; 0: exact sensors)")
     p.add_argument("--noise-fraction", type=float, default=0.0, metavar="F",
                    help="white sensor noise as a share of each channel's rms, e.g. 0.1 (default: 0)")
+    p.add_argument("--gyro-noise-std-radps", type=float, default=None, metavar="RADPS",
+                   help=f"white noise of a gyro channel [rad/s] (default: {MEMS_GYRO_NOISE_RADPS:g}, the "
+                        "same MEMS part's gyro; 0 where the accelerometers' default is 0)")
     p.add_argument("--method", choices=tuple(METHODS), default=None,
                    help="estimation method (default: likelihood, the nodes' default: Rozyn's pipeline "
                         "then the likelihood refinement; rozyn: Rozyn's pipeline alone; --model full has "
@@ -79,8 +83,9 @@ def trial_spec(args: argparse.Namespace) -> TrialSpec:
         road=args.road, road_class=args.road_class, amplitudes=args.amplitudes,
         laplace_nu=args.laplace_nu, waviness=args.waviness, speed_kmh=args.speed_kmh,
         drive_cycle=args.drive_cycle, duration_s=args.duration_s, rate_hz=args.rate_hz,
-        noise_std_mps2=noise_std(args),
-        noise_fraction=args.noise_fraction, vehicle=car.vehicle(args.vehicle),
+        noise_std_mps2=noise_std(args), gyro_noise_std_radps=gyro_noise_std(args),
+        noise_fraction=args.noise_fraction,
+        vehicle=with_sensor_preset(car.vehicle(args.vehicle), args.sensors),
         method=args.method or "likelihood", departures=Departures(**departure_values(args)),
         **vehicle_error_values(args), speed_error=args.speed_error, load_change_kg=args.load_change_kg,
         load_change_x_m=args.load_change_x_m, load_change_at_s=args.load_change_at_s,
@@ -93,6 +98,13 @@ def noise_std(args: argparse.Namespace) -> float:
     if args.noise_std_mps2 is not None:
         return float(args.noise_std_mps2)
     return 0.0 if args.noise_fraction > 0 or args.road == "free-decay" else MEMS_NOISE_MPS2
+
+
+def gyro_noise_std(args: argparse.Namespace) -> float:
+    """A gyro's noise: as given, else the MEMS part's where the accelerometers have theirs."""
+    if args.gyro_noise_std_radps is not None:
+        return float(args.gyro_noise_std_radps)
+    return 0.0 if args.noise_fraction > 0 or args.road == "free-decay" else MEMS_GYRO_NOISE_RADPS
 
 
 def run(args: argparse.Namespace) -> int:

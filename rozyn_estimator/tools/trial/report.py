@@ -50,8 +50,10 @@ def headline(spec: TrialSpec, n_seeds: int) -> str:
     method = _METHOD_LABELS.get(spec.method, f"method {spec.method}") if spec.car.name == "full" \
         else f"method {spec.method}"
     speed = f"drive cycle {spec.drive_cycle}" if spec.drive_cycle else f"{spec.speed_kmh:g} km/h"
+    sensors = getattr(spec.vehicle, "sensors", None)
+    where = f"; sensors: {sensors.describe()}" if sensors is not None else ""
     return (f"{road}, {speed}, {spec.duration_s:g} s at {spec.rate_hz:g} Hz, "
-            f"{method}, {n_seeds} seed(s)")
+            f"{method}, {n_seeds} seed(s){where}")
 
 
 def format_trials(spec: TrialSpec, results: Sequence[TrialResult]) -> str:

@@ -57,6 +57,8 @@ class TrialSpec:
     rate_hz: float = param(100.0, "accelerometer rate", unit="Hz")
     noise_std_mps2: float = param(0.0, "white sensor noise", unit="m/s^2")
     noise_fraction: float = param(0.0, "white noise std as a share of each channel's rms", low=0.0)
+    gyro_noise_std_radps: float = param(0.0, "white noise of a gyro channel (a sensors block's)",
+                                        unit="rad/s")
     bias_mps2: tuple[float, float] = param((0.0, 0.0), "constant sensor offsets (front, rear)", unit="m/s^2",
                                            length=2)
     speed_variation: float = param(0.0, "relative amplitude of a sinusoidal speed change")
@@ -120,6 +122,7 @@ class TrialSpec:
             **car, road=road, seed=seed, speed_kmh=self.speed_kmh, drive_cycle_file=self.drive_cycle,
             speed_variation=self.speed_variation, speed_period_s=self.speed_period_s,
             rate_hz=self.rate_hz, noise_std_mps2=self.noise_std_mps2, bias_mps2=self.bias_mps2,
+            gyro_noise_std_radps=self.gyro_noise_std_radps,
             duration_s=self.duration_s if self.periodic else 0.0, departures=self.departures,
             load_change_kg=self.load_change_kg, load_change_x_m=self.load_change_x_m,
             load_change_at_s=self.load_change_at_s,

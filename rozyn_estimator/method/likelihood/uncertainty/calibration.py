@@ -73,6 +73,8 @@ def calibration(objective: WhittleObjective, model: HalfCarSpectrum, start: np.n
     inv = inverse_information(info[np.ix_(keep, keep)])
     out = []
     for name, std in stds.items():
+        if name == "sensor_rear_x_m" and model.pitch_gyro:  # a gyro's position: nothing to calibrate
+            continue
         k = int(np.sum(keep[: model.index[name]]))
         value, sd = float(stepped[model.index[name]]), math.sqrt(inv[k, k])
         key = CALIBRATED.get(name) or POSITION_KEYS[name]

@@ -1,0 +1,178 @@
+"""The body's sensors as data: where each sits and which channels of its ``sensor_msgs/Imu`` it gives.
+
+A vehicle file may hold a ``sensors`` block (REP 103/145: x forward, y left, z up)::
+
+    sensors:
+      names: [imu]
+      imu:
+        topic: /imu/data            # sensor_msgs/msg/Imu
+        x_m: 1.5                    # behind the front axle
+        y_m: 0.0                    # left of the centreline
+        channels: [accel_z, gyro_y]
+
+A channel is one number of the message: ``accel_z`` (``linear_acceleration.z``, the vertical
+specific force, +g at rest), ``gyro_y`` (``angular_velocity.y``, the pitch rate, positive when
+the nose dips), ``gyro_x`` (``angular_velocity.x``, the roll rate, positive when the left side
+rises). Without the block a half car has today's two accelerometers (``front_topic`` at
+``sensor_front_offset_m``, ``rear_topic`` at ``sensor_rear_offset_m``), which is the block's
+preset. This module holds the data and checks what the half car can use; the model reads the
+channels through :func:`rozyn_estimator.body_model.half_car_sensor_rows`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from rozyn_estimator.errors import ConfigError
+
+CHANNEL_FIELDS: Mapping[str, str] = {
+    "accel_z": "linear_acceleration.z",
+    "gyro_x": "angular_velocity.x",
+    "gyro_y": "angular_velocity.y",
+}
+"""Each channel kind and the ``sensor_msgs/Imu`` field it reads."""
+CHANNEL_UNITS: Mapping[str, str] = {"accel_z": "m/s^2", "gyro_x": "rad/s", "gyro_y": "rad/s"}
+_SENSOR_KEYS = ("topic", "x_m", "y_m", "channels")
+MAX_SENSORS = 16
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """One body sensor publishing ``sensor_msgs/Imu``."""
+
+    name: str  # the sensor's name in the vehicle file (and in diagnostics)
+    topic: str  # its sensor_msgs/msg/Imu topic
+    x_m: float  # behind the front axle [m]
+    y_m: float = 0.0  # left of the centreline [m]
+    channels: tuple[str, ...] = ("accel_z",)  # of CHANNEL_FIELDS, in the order given
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One channel the estimator fits: a sensor's accel_z or gyro."""
+
+    sensor: str  # the sensor's name
+    kind: str  # accel_z, gyro_x or gyro_y
+    topic: str  # the sensor's topic
+    x_m: float  # the sensor's position behind the front axle [m]
+
+    @property
+    def field(self) -> str:
+        """The ``sensor_msgs/Imu`` field the channel reads."""
+        return CHANNEL_FIELDS[self.kind]
+
+    @property
+    def label(self) -> str:
+        """``imu.gyro_y``: how diagnostics and errors name it."""
+        return f"{self.sensor}.{self.kind}"
+
+
+@dataclass(frozen=True)
+class SensorSet:
+    """The sensors of a vehicle file's ``sensors`` block, in the order of ``names``."""
+
+    sensors: tuple[Sensor, ...]
+
+    @property
+    def channels(self) -> tuple[Channel, ...]:
+        """Every sensor's channels, sensor by sensor."""
+        return tuple(Channel(s.name, kind, s.topic, s.x_m) for s in self.sensors for kind in s.channels)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The block as a vehicle file holds it."""
+        out: dict[str, Any] = {"names": [s.name for s in self.sensors]}
+        for s in self.sensors:
+            out[s.name] = {"topic": s.topic, "x_m": s.x_m, "y_m": s.y_m, "channels": list(s.channels)}
+        return out
+
+    def describe(self) -> str:
+        """``imu (/imu/data, x 1.50 m): accel_z, gyro_y``: one line for a log."""
+        return "; ".join(f"{s.name} ({s.topic}, x {s.x_m:.2f} m): {', '.join(s.channels)}"
+                         for s in self.sensors)
+
+
+def sensors_from_mapping(data: Any, source: str = "sensors") -> SensorSet:
+    """The ``sensors`` block of a vehicle file; ConfigError naming what is wrong."""
+    where = f"{source}: sensors"
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"{where}: expected a mapping with names and one entry per name, got "
+                          f"{type(data).__name__}")
+    names = data.get("names")
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) and n for n in names):
+        raise ConfigError(f"{where}: names must be a non-empty list of sensor names, e.g. names: [imu]")
+    if len(names) > MAX_SENSORS or len(set(names)) != len(names):
+        raise ConfigError(f"{where}: names must be distinct and at most {MAX_SENSORS}, got {len(names)}")
+    unknown = sorted(str(k) for k in set(data) - {"names", *names})
+    if unknown:
+        raise ConfigError(f"{where}: {', '.join(unknown[:5])} not in names {names}")
+    return SensorSet(tuple(_sensor(name, data.get(name), f"{where}.{name}") for name in names))
+
+
+def _sensor(name: str, entry: Any, where: str) -> Sensor:
+    if not isinstance(entry, Mapping):
+        raise ConfigError(f"{where}: expected a mapping of {', '.join(_SENSOR_KEYS)}")
+    unknown = sorted(str(k) for k in set(entry) - set(_SENSOR_KEYS))
+    if unknown:
+        raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown[:5])}; known: "
+                          f"{', '.join(_SENSOR_KEYS)}")
+    topic = entry.get("topic")
+    if not isinstance(topic, str) or not topic.strip():
+        raise ConfigError(f"{where}.topic: a sensor_msgs/msg/Imu topic name is required")
+    position = []
+    for key in ("x_m", "y_m"):
+        value = entry.get(key, 0.0 if key == "y_m" else None)
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) \
+                or abs(value) > 100.0:
+            raise ConfigError(f"{where}.{key}: expected a position in metres (|value| <= 100), got {value!r}")
+        position.append(float(value))
+    channels = entry.get("channels", ["accel_z"])
+    if not isinstance(channels, list) or not channels or len(set(map(str, channels))) != len(channels) \
+            or any(c not in CHANNEL_FIELDS for c in channels):
+        raise ConfigError(f"{where}.channels: a list of distinct channels of {', '.join(CHANNEL_FIELDS)}, "
+                          f"got {channels!r}")
+    return Sensor(name, topic.strip(), position[0], position[1], tuple(channels))
+
+
+def half_car_channels(sensors: SensorSet, wheelbase_m: float) -> tuple[Channel, Channel]:
+    """The two channels the half car fits, accelerometer first; ConfigError (one line naming
+    what is missing) for a set that cannot identify the mass, the pitch inertia and the CoG.
+
+    The half car has no roll: its sensors sit on the centreline and give no ``gyro_x``. It
+    fits two channels: two accelerometers at least a quarter wheelbase apart (heave and
+    pitch from their sum and difference), or one accelerometer and a pitch gyro.
+    """
+    off_line = [s.name for s in sensors.sensors if s.y_m != 0.0]
+    if off_line:
+        raise ConfigError(f"sensors: {', '.join(off_line)} sits off the centreline (y_m != 0), and the half "
+                          "car does not roll: give y_m: 0 (off the centreline a sensor sees roll, which the "
+                          "half car does not model)")
+    chans = sensors.channels
+    rolls = [c.label for c in chans if c.kind == "gyro_x"]
+    if rolls:
+        raise ConfigError(f"sensors: {', '.join(rolls)}: the half car does not roll; leave gyro_x out")
+    accels = [c for c in chans if c.kind == "accel_z"]
+    gyros = [c for c in chans if c.kind == "gyro_y"]
+    if not accels:
+        raise ConfigError("sensors: a pitch gyro sees pitch but not heave, so not the mass: add an accel_z "
+                          "channel")
+    if len(accels) == 1 and not gyros:
+        raise ConfigError(f"sensors: one accelerometer ({accels[0].label}) sees heave but not pitch: add a "
+                          "gyro_y channel or a second accelerometer a quarter wheelbase away or more")
+    if len(chans) > 2:
+        raise ConfigError(f"sensors: the half car fits two channels (an accel_z and a gyro_y, or two "
+                          f"accelerometers), got {len(chans)}: {', '.join(c.label for c in chans)}")
+    if gyros:
+        return accels[0], gyros[0]
+    front, rear = sorted(accels, key=lambda c: c.x_m)
+    if rear.x_m - front.x_m < 0.25 * wheelbase_m:
+        raise ConfigError(f"sensors: {front.label} and {rear.label} sit {rear.x_m - front.x_m:.2f} m apart: "
+                          f"two accelerometers must be a quarter wheelbase ({0.25 * wheelbase_m:.2f} m) "
+                          "apart or more to see pitch")
+    return front, rear
+
+
+__all__ = ["CHANNEL_FIELDS", "CHANNEL_UNITS", "Channel", "Sensor", "SensorSet", "half_car_channels",
+           "sensors_from_mapping"]
