@@ -26,9 +26,10 @@ stop are fused as any other (they hold both loads, which only the test can tell)
 
 What fusing cannot reduce: a varying drive's model (the mixture of local spectra,
 :mod:`~rozyn_estimator.method.likelihood.road_input`) is an approximation, which on urban windows
-read I_yy 0.5 %, m 0.3 % and l_f 0.1-0.2 % low (the half car; the full car's I_xx 0.7 %; docs/
-method.md, "Real drives"). One window's spread is 4-8 times that, but a half hour's fused
-estimate is as precise as the bias is large (its coverage of I_yy fell to 88 %). So the
+read I_yy up to 0.5 % low (the half car's with one IMU 0.4 %, with two accelerometers 0.1 %; the
+full car's I_xx 0.7 %; docs/method.md, "Real drives"). One window's spread is 4-8 times that,
+but a half hour's fused estimate is as precise as the bias is large (cut square, the half car's
+coverage of I_yy fell to 88 %). So the
 published covariance holds :data:`DRIVE_MODEL_FLOOR` of each value as a systematic part
 (``drive_model`` in the budget) in the share of the fused windows that were stop-and-go
 (masked in part: :func:`~rozyn_estimator.method.likelihood.road_input.unsteady`); steady

@@ -28,6 +28,8 @@ class LikelihoodConfig:
     aliases: int = param(1, "aliasing terms of the sampled spectrum modelled on each side", low=0, high=5)
     road_max_cpm: float = param(5.0, "the road's profile ends here (a tyre smooths shorter waves away): the "
                                 "aliases hold the road below it only (0: no end)", unit="cycles/m", low=0.0)
+    ramp_s: float = param(6.0, "a varying drive's steady stretches are ramped in and out over this (a raised "
+                          "cosine inside each; 0: cut square)", unit="s", low=0.0, high=60.0)
     estimate_waviness: bool = param(True, "fit the road's waviness w (ISO 8608 allows w other than 2)")
     road_shape_terms: int = param(4, "smooth departures of the road spectrum from a power law", low=0, high=8)
     estimate_suspension: bool = param(False, "fit the suspension stiffness and damping (per corner) too")

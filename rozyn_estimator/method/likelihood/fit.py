@@ -45,7 +45,7 @@ from rozyn_estimator.method.likelihood.fitcheck import ModelFit, model_fit, unst
 from rozyn_estimator.method.likelihood.model import CORNERS, HalfCarSpectrum
 from rozyn_estimator.method.likelihood.newton import Fits, aground, noise_share
 from rozyn_estimator.method.likelihood.objective import WhittleObjective
-from rozyn_estimator.method.likelihood.road_input import steady_window, unsteady
+from rozyn_estimator.method.likelihood.road_input import steady_gates, steady_window, unsteady
 from rozyn_estimator.method.likelihood.score import SandwichRatio
 from rozyn_estimator.method.likelihood.spectra import (
     Spectra,
@@ -184,7 +184,7 @@ def _refine(
     L = vehicle.wheelbase_m
     n = fast_length(y.shape[0])  # the window's newest n samples (its FFTs' fast length)
     y, v = y[-n:], v[-n:] if v.size > 1 else v
-    spectra = window_spectra(steady_window(y, L, v, fs), fs, band, cfg.taper)
+    spectra = window_spectra(steady_window(y, L, v, fs, cfg.ramp_s), fs, band, cfg.taper)
     if spectra.freq_hz.size < 50:
         return Refinement(status="failed", reason=f"too few frequencies in {band[0]:g}-{band[1]:g} Hz")
     if v.size == 1 and v[0] == 0:
@@ -200,7 +200,7 @@ def _refine(
                             window_weights=spectra.window_weights,
                             grid_step=1 if _noise_free(warm, spectra) else _bins(cfg.grid_hz, spectra),
                             road_max_cpm=cfg.road_max_cpm,
-                            sample_weights=taper_window(n, cfg.taper) ** 2 if varying else None)
+                            sample_weights=_weights(n, cfg, L, v, fs) if varying else None)
     objective = WhittleObjective(model, spectra, cfg.spectra)
     # A calibration's Newton step of the augmented posterior follows when there are values
     # to calibrate: it also completes the fit's last bit of convergence.
@@ -377,6 +377,13 @@ def _start(
     scale = max(float(np.sum(power)) / road, 1e-300)
     theta[3] = math.log(scale)
     return theta, scale * (S - floor) + floor
+
+
+def _weights(n: int, cfg: LikelihoodConfig, wheelbase_m: float, speed_mps: np.ndarray,
+             fs: float) -> np.ndarray:
+    """What each sample of a varying drive counts for in the periodogram: the taper's and its
+    steady stretch's ramp (:func:`steady_gates`), squared."""
+    return (taper_window(n, cfg.taper) * steady_gates(wheelbase_m, speed_mps, fs, cfg.ramp_s)) ** 2
 
 
 def _bins(width_hz: float, spectra: Spectra) -> int:

@@ -102,14 +102,35 @@ def steady_driving(wheelbase_m: float, speed_mps: np.ndarray, fs_hz: float,
 
 
 def steady_window(accel: np.ndarray, wheelbase_m: float, speed_mps: float | np.ndarray,
-                  fs_hz: float) -> np.ndarray:
+                  fs_hz: float, ramp_s: float = 0.0) -> np.ndarray:
     """A window's accelerations as the model of a varying drive holds them: demeaned over its
-    :func:`steady_driving` samples and zero elsewhere (at a constant speed: as they are)."""
+    :func:`steady_driving` samples and zero elsewhere (at a constant speed: as they are); with
+    ``ramp_s``, each steady stretch ramped in and out (:func:`steady_gates`)."""
     if not is_varying(speed_mps):
         return accel
-    keep = steady_driving(wheelbase_m, np.asarray(speed_mps, dtype=float), fs_hz)
+    gates = steady_gates(wheelbase_m, np.asarray(speed_mps, dtype=float), fs_hz, ramp_s)
+    keep = gates > 0
     y = np.asarray(accel, dtype=float)
-    return np.where(keep[:, None], y - y[keep].mean(axis=0), 0.0) if np.any(keep) else y
+    return gates[:, None] * (y - y[keep].mean(axis=0)) if np.any(keep) else y
+
+
+def steady_gates(wheelbase_m: float, speed_mps: np.ndarray, fs_hz: float, ramp_s: float = 0.0) -> np.ndarray:
+    """(n,) 1 on :func:`steady_driving` samples and 0 elsewhere; with ``ramp_s`` > 0 each steady
+    stretch rises and falls over a raised cosine of ``ramp_s`` (at most half the stretch) inside
+    it: a square gate spreads the body modes' power across the band, a ramp keeps it near them."""
+    keep = steady_driving(wheelbase_m, speed_mps, fs_hz).astype(float)
+    n_ramp = round(ramp_s * fs_hz)
+    if n_ramp < 2 or not np.any(keep):
+        return keep
+    edges = np.diff(np.concatenate(([0.0], keep, [0.0])))
+    starts, stops = np.flatnonzero(edges > 0), np.flatnonzero(edges < 0)
+    for lo, hi in zip(starts.tolist(), stops.tolist(), strict=True):  # a stretch per stop: few
+        r = min(n_ramp, (hi - lo) // 2)
+        if r >= 1:
+            rise = 0.5 * (1.0 - np.cos(np.pi * (np.arange(r) + 0.5) / r))
+            keep[lo:lo + r] *= rise
+            keep[hi - r:hi] *= rise[::-1]
+    return keep
 
 
 def unsteady(wheelbase_m: float, speed_mps: float | np.ndarray, fs_hz: float) -> bool:
