@@ -102,8 +102,8 @@ def test_a_signal_at_each_moment_stops_the_estimator_in_order(phase, sig, monkey
                 publish(update)
             monkeypatch.setattr(node, "_publish_update", slow_publish)
         for k, (front, rear) in enumerate(ACCEL[:2001].tolist()):  # one update falls due at 20 s
-            node._on_imu(0, _imu(k * NS // 100, front))
-            node._on_imu(1, _imu(k * NS // 100, rear))
+            node._on_imu([0], _imu(k * NS // 100, front))
+            node._on_imu([1], _imu(k * NS // 100, rear))
         if phase == "idle":
             while node.pending_updates:
                 time.sleep(0.01)

@@ -43,6 +43,7 @@ from rozyn_estimator.body_model import (
     full_car_model,
     full_car_sensor_points,
     half_car_model,
+    half_car_sensor_rates,
     half_car_sensor_rows,
 )
 from rozyn_estimator.errors import ConfigError
@@ -84,15 +85,17 @@ def with_params(vehicle: Vehicle | FullVehicle, params: np.ndarray) -> Vehicle |
 
 def load_transfer_mps2(vehicle: Vehicle | FullVehicle, accel_x_mps2: np.ndarray, fs_hz: float,
                        columns: tuple[int, ...] | None = None) -> np.ndarray:
-    """(n, sensors) the body's vertical acceleration at the sensors (the full car's: those of
-    ``columns``, default all four) from the load transfer of the longitudinal acceleration
+    """(n, sensors) the body's vertical acceleration at the sensors (a gyro's rate; the full car's:
+    those of ``columns``, default all four) from the load transfer of the longitudinal acceleration
     ``accel_x_mps2`` (n,) (see the module's docstring)."""
     if isinstance(vehicle, FullVehicle):
         model, pitch = full_car_model(vehicle), FULL_PITCH
         rows = full_car_body_rows(vehicle, full_car_sensor_points(vehicle))
         rows = rows if columns is None else rows[list(columns)]
+        rates = np.zeros(rows.shape[0], dtype=bool)
     else:
         model, rows, pitch = half_car_model(vehicle), half_car_sensor_rows(vehicle), HALF_PITCH
+        rates = half_car_sensor_rates(vehicle)  # a gyro reads the rate: iω, not -ω²
     a = np.asarray(accel_x_mps2, dtype=float)
     n = a.size
     nfft = fft.next_fast_len(2 * n, real=True)
@@ -102,7 +105,8 @@ def load_transfer_mps2(vehicle: Vehicle | FullVehicle, accel_x_mps2: np.ndarray,
     force = np.zeros(model.dof)
     force[pitch] = vehicle.sprung_mass_kg * vehicle.cog_height_m
     q = np.linalg.solve(dynamic, np.broadcast_to(force, (w.size, model.dof))[..., None])[..., 0]
-    spectrum = -(w * w)[:, None] * (q @ rows.T) * fft.rfft(a - a[0], nfft)[:, None]
+    reads = np.where(rates, 1j * w[:, None], -(w * w)[:, None])
+    spectrum = reads * (q @ rows.T) * fft.rfft(a - a[0], nfft)[:, None]
     return fft.irfft(spectrum, nfft, axis=0)[:n]
 
 
