@@ -75,3 +75,25 @@ def test_a_slow_estimator_slows_the_demo_down_and_loses_nothing(tmp_path, monkey
     assert [float(r["stamp_s"]) for r in rows][-1] >= 34.99 and len(rows) == 7
     assert sum(r["published"] == "1" for r in rows) == 4  # the window 80 % full from 20 s on
     assert f"plot: {out / 'estimates.png'}" in printed and Path(out / "estimates.png").stat().st_size > 10_000
+
+
+def test_the_demo_gives_both_nodes_one_imu_as_a_vehicle_file():
+    """``--sensors imu``: a sensors block is no flat parameter, so both nodes get it as a file;
+    the *_error options (which change flat values) are refused with it."""
+    import argparse
+
+    from rozyn_estimator.errors import ConfigError
+    from rozyn_estimator.online import EstimatorConfig
+    from rozyn_estimator.tools.demo.command import add_arguments, node_values
+    from sim_node.node import sim_config
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    estimator, sim = node_values(parser.parse_args(["--sensors", "imu"]))
+    assert estimator["vehicle_file"] == sim["vehicle_file"]
+    config = EstimatorConfig.from_parameters(estimator)
+    assert config.sensors == (("imu.accel_z", "/imu/data"), ("imu.gyro_y", "/imu/data"))
+    assert config.vehicle.sensor_x_m == pytest.approx((1.5, 1.5))  # 0.3 m behind the CoG
+    assert sim_config(sim).channels == ("imu.accel_z", "imu.gyro_y")
+    with pytest.raises(ConfigError, match="sensors block"):
+        node_values(parser.parse_args(["--sensors", "imu", "--stiffness-error", "0.1"]))

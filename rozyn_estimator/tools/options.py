@@ -61,6 +61,11 @@ def add_vehicle_option(p: argparse.ArgumentParser) -> None:
     """``--vehicle FILE.yaml``: the vehicle's parameters (default: the thesis' Table 5-1), and
     ``--sensors``: where the half car's sensors are."""
     p.add_argument("--vehicle", metavar="FILE.yaml", help="vehicle parameters (default: thesis Table 5-1)")
+    add_sensors_option(p)
+
+
+def add_sensors_option(p: argparse.ArgumentParser) -> None:
+    """``--sensors axles|imu``: where the half car's sensors are (:func:`with_sensor_preset`)."""
     p.add_argument("--sensors", choices=SENSOR_PRESETS, default=None,
                    help="the half car's sensors: axles, two accelerometers at the vehicle's offsets; imu, "
                         f"one IMU (accel_z and gyro_y on /imu/data) {IMU_BEHIND_COG_M:g} m behind the CoG "

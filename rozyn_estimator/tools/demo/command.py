@@ -34,22 +34,26 @@ import os
 import shutil
 import signal
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from rozyn_estimator.bag import absolute_topic
 from rozyn_estimator.errors import BagError, ConfigError
 from rozyn_estimator.tools.demo.output import Seen, print_new, summary, write_outputs
 from rozyn_estimator.tools.options import (
     add_departure_options,
     add_drive_options,
+    add_sensors_option,
     add_vehicle_error_options,
     departure_values,
     drive_label,
     load_change_values,
     vehicle_error_values,
+    with_sensor_preset,
 )
 from sim_node.sensors import MEMS_NOISE_MPS2
 
@@ -127,6 +131,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--vehicle", metavar="FILE.yaml",
                    help="vehicle file of the simulator and the estimator (default: the model's defaults, "
                    "config/vehicle.yaml's or config/vehicle_full.yaml's values)")
+    add_sensors_option(p)
     p.add_argument(
         "--bag-dir",
         default="bags",
@@ -177,7 +182,7 @@ def _vehicle_values(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str,
     """The vehicle as both nodes' ``vehicle.*`` parameters (twice: the estimator's to change),
     from ``--vehicle`` and ``--model``; ConfigError when they disagree."""
     from rozyn_estimator.parameters import flatten
-    from rozyn_estimator.vehicle import Vehicle
+    from rozyn_estimator.vehicle import Vehicle, dump_vehicle
     from rozyn_estimator.vehicle_full import FullVehicle, load_any_vehicle
 
     vehicle: Vehicle | FullVehicle = FullVehicle() if args.model == "full" else Vehicle()
@@ -188,6 +193,14 @@ def _vehicle_values(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str,
             needs = "says model: full" if args.model == "full" else "has no model: full"
             raise ConfigError(f"--vehicle {args.vehicle} is a {model} car's vehicle file; --model "
                               f"{args.model} needs one that {needs}")
+    vehicle = with_sensor_preset(vehicle, args.sensors)
+    if isinstance(vehicle, Vehicle) and vehicle.sensors is not None:  # a block is no flat parameter: a file
+        if any(error != 0.0 for error in vehicle_error_values(args).values()):
+            raise ConfigError("the --*-error options change vehicle.* values; a vehicle with a sensors block "
+                              "is given to the nodes as its file, as it is")
+        path = Path(tempfile.mkdtemp(prefix="rozyn-demo-")) / "vehicle.yaml"
+        path.write_text(dump_vehicle(vehicle))
+        return {"vehicle_file": str(path)}, {"vehicle_file": str(path)}
     values = {f.name: f.value for f in flatten(vehicle)}
     if isinstance(vehicle, FullVehicle):
         values["vehicle.model"] = "full"
@@ -269,7 +282,7 @@ def run(args: argparse.Namespace) -> int:
         context=ctx,
         parameter_overrides=[Parameter(k, value=v) for k, v in sim_values.items()],
     )
-    accel = [f"/{topic}" for _, topic in est.config.sensors]
+    accel = list(dict.fromkeys(absolute_topic(topic) for _, topic in est.config.sensors))  # an IMU's once
     intakes = [] if recorder is None else [functools.partial(recorder.received, t) for t in accel]
     pacer = Pacer(sim, est, intakes)
     sim.gate = pacer
@@ -280,7 +293,7 @@ def run(args: argparse.Namespace) -> int:
         f"rozyn demo: {'the full car, ' if seen.layout.full else ''}{args.road} road ({args.amplitudes} "
         f"amplitudes), {drive_label(args)}, "
         f"{args.duration_s:g} s of sim time at {args.real_time_factor:g}x, window {args.window_s:g} s "
-        f"(ROS_DOMAIN_ID {domain})",
+        f"(ROS_DOMAIN_ID {domain}){_sensors_label(sim.config)}",
         flush=True,
     )
     started = time.monotonic()
@@ -332,6 +345,12 @@ def _rozyn_command() -> str:
     if found and Path(found).resolve() == here.resolve():
         return "rozyn"
     return os.path.relpath(here) if here.exists() else "rozyn"
+
+
+def _sensors_label(config: Any) -> str:
+    """``; sensors: imu (/imu/data, x 1.50 m): accel_z, gyro_y`` for a sensors block, else nothing."""
+    block = config.vehicle.sensors if config.model == "half" else None
+    return f"; sensors: {block.describe()}" if block is not None else ""
 
 
 def _wait_for_recorder(

@@ -30,9 +30,12 @@ def format_summary(result: ReplayResult) -> str:
         The report, lines joined by newlines.
     """
     cfg = result.config
+    block = cfg.vehicle.sensors if cfg.full_vehicle is None else None
+    sources = f"{block.describe()}" if block is not None else \
+        f"{', '.join(absolute_topic(t) for _, t in cfg.sensors)}, {cfg.field}"
     lines = [
-        f"replayed {result.bag} ({cfg.model} car): {result.accel_messages} accelerometer messages "
-        f"({', '.join(absolute_topic(t) for _, t in cfg.sensors)}, {cfg.field})"
+        f"replayed {result.bag} ({cfg.model} car): {result.accel_messages} "
+        f"{'sensor' if block is not None else 'accelerometer'} messages ({sources})"
         + (
             f" and {result.speed_messages} speed messages ({absolute_topic(cfg.speed_topic)})"
             if cfg.speed_topic
