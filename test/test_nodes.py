@@ -121,7 +121,7 @@ def test_one_imu_through_both_nodes(ros, tmp_path):
     assert msg.angular_velocity_covariance[4] > 0 and msg.linear_acceleration.z > 9.0
     assert 0.0 < abs(msg.angular_velocity.y) < 1.0 and msg.angular_velocity.x == 0.0
     names = {kv.key for s in estimator_status(got) for kv in s.values}
-    assert {"samples_imu.accel_z", "samples_imu.gyro_y"} <= names, sorted(names)
+    assert {"samples_imu.accel_z", "samples_imu.gyro_y", "noise_std_imu.gyro_y_radps"} <= names, sorted(names)
 
 
 def test_the_sim_waits_for_as_many_subscribers_as_asked(ros):

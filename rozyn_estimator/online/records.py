@@ -214,6 +214,6 @@ def _refinement_values(ref: Any, channels: Sequence[str]) -> dict[str, str]:
     if ref is not None and ref.ok:
         out["road_waviness"] = f"{ref.waviness:.3f}"
         for c, noise in zip(channels, ref.noise_std_mps2, strict=False):
-            out[f"noise_std_{c}_mps2"] = f"{noise:.4g}"
+            out[f"noise_std_{c}_{'radps' if '.gyro_' in c else 'mps2'}"] = f"{noise:.4g}"  # a gyro's in rad/s
         out["refine_iterations"] = str(ref.iterations)
     return out
