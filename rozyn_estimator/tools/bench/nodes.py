@@ -38,12 +38,15 @@ BIN = Path(sys.executable).parent
 WINDOW_S = OnlineConfig().window_s  # the node's default window
 
 
-def _publish(domain: int, rate_hz: float, duration_s: float, start_ns: int, log: Any) -> None:
+def _publish(domain: int, rate_hz: float, duration_s: float, start_ns: int, log: Any,
+             cycle: str = "") -> None:
     """Publisher process: the simulator's front/rear accelerations (ISO A with Gaussian
     amplitudes, 100 km/h, white sensor noise of 0.05 m/s² — about 10 % at 100 Hz: what a
-    vehicle's IMUs give) as aligned Imu pairs at ``rate_hz``, paced on the clock."""
+    vehicle's IMUs give) as aligned Imu pairs at ``rate_hz``, paced on the clock; with a drive
+    ``cycle`` the vehicle follows it and its speed goes out on ``speed`` at 10 Hz (TwistStamped)."""
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     import rclpy
+    from geometry_msgs.msg import TwistStamped
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import Imu
 
@@ -51,6 +54,7 @@ def _publish(domain: int, rate_hz: float, duration_s: float, start_ns: int, log:
     node = rclpy.create_node("bench_publisher")
     qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
     pubs = [node.create_publisher(Imu, t, qos) for t in ("accel/front", "accel/rear")]
+    speed_pub = node.create_publisher(TwistStamped, "speed", qos)
     deadline = time.monotonic() + 10
     while time.monotonic() < deadline and not all(p.get_subscription_count() for p in pubs):
         time.sleep(0.01)
@@ -58,8 +62,11 @@ def _publish(domain: int, rate_hz: float, duration_s: float, start_ns: int, log:
     from sim_node.simulation import SimConfig, Simulation
 
     sim = Simulation(SimConfig(road=RoadSpec(amplitudes="gaussian"), noise_std_mps2=0.05, rate_hz=rate_hz,
-                               duration_s=duration_s))
-    accel = sim.run(duration_s).accel_mps2.tolist()
+                               duration_s=duration_s, drive_cycle_file=cycle))
+    block = sim.run(duration_s)
+    accel, speeds = block.accel_mps2.tolist(), block.speed_mps.tolist()
+    every = max(1, round(rate_hz / 10.0))  # the speed at 10 Hz, as a CAN bus gives it
+    twist = TwistStamped()
     msg = Imu()
     n_total = len(accel)
     step = NS / rate_hz
@@ -71,6 +78,10 @@ def _publish(domain: int, rate_hz: float, duration_s: float, start_ns: int, log:
         while sent < due:
             stamp = start_ns + round(sent * step)
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, NS)
+            if cycle and sent % every == 0:
+                twist.header.stamp = msg.header.stamp
+                twist.twist.linear.x = speeds[sent]
+                speed_pub.publish(twist)
             for pub, value in zip(pubs, accel[sent], strict=True):
                 msg.linear_acceleration.z = value
                 pub.publish(msg)
@@ -148,12 +159,13 @@ def _stop(proc: subprocess.Popen) -> None:
         os.killpg(proc.pid, signal.SIGKILL)
 
 
-def _feed(domain: int, watch: _Watch, rate_hz: float, duration_s: float, start_ns: int) -> dict[str, Any]:
+def _feed(domain: int, watch: _Watch, rate_hz: float, duration_s: float, start_ns: int,
+          cycle: str = "") -> dict[str, Any]:
     """Publish for ``duration_s``; return published/taken counts and the publish log."""
     ctx = mp.get_context("spawn")
     log = ctx.Queue()
     before = watch.taken()
-    proc = ctx.Process(target=_publish, args=(domain, rate_hz, duration_s, start_ns, log))
+    proc = ctx.Process(target=_publish, args=(domain, rate_hz, duration_s, start_ns, log, cycle))
     proc.start()
     result = None
     while result is None:
@@ -206,21 +218,25 @@ def bench_intake(domain: int, rates_hz: tuple[float, ...] = (100, 500, 1000, 200
 
 
 def bench_cpu_and_latency(domain: int, rate_hz: float, duration_s: float,
-                          refine: str = "likelihood") -> dict[str, Any]:
+                          refine: str = "likelihood", cycle: str = "") -> dict[str, Any]:
     """CPU share with updates running, and update-to-publish latency, with the pipeline's
     own share of it (``pipeline_ms``: Rozyn's stage plus the refinement when on): over all
     updates, and (``*_full_window``) over those whose window is full (the steady state of a
-    drive longer than the window; none unless ``duration_s`` exceeds it)."""
-    # The publisher's road is driven at 100 km/h; the refinement needs the speed.
+    drive longer than the window; none unless ``duration_s`` exceeds it). With a drive ``cycle``
+    the node reads the publisher's speed topic (a varying drive: its windows hold driving)."""
+    # The publisher's road is driven at 100 km/h (or the cycle); the refinement needs the speed.
     # The default window and schedule (120 s, every 5 s), first update after 30 s.
-    est = _start_estimator(domain, "min_window_fill:=0.25", f"pipeline.refine:={refine}",
-                           f"speed_mps:={100 / 3.6}")
+    speed = ("speed_topic:=speed",) if cycle else (f"speed_mps:={100 / 3.6}",)
+    est = _start_estimator(domain, "min_window_fill:=0.25", f"pipeline.refine:={refine}", *speed)
     watch = _Watch(domain)
     start_ns = 2000 * NS
     try:
         watch.spin(2.0)
         out: dict[str, Any] = {}
-        cpu = _cpu_pct(est.pid, lambda: out.update(_feed(domain, watch, rate_hz, duration_s, start_ns)))
+        def feed() -> None:
+            out.update(_feed(domain, watch, rate_hz, duration_s, start_ns, cycle))
+
+        cpu = _cpu_pct(est.pid, feed)
         watch.spin(2.0)
         published = dict(out["times"])
         lat = {stamp: (arrival - published[stamp]) * 1e3
@@ -230,7 +246,8 @@ def bench_cpu_and_latency(domain: int, rate_hz: float, duration_s: float,
         _stop(est)
     pipe = {round(float(stamp) * NS): ms for stamp, ms in watch.pipeline_ms.items()}
     full = [stamp for stamp in lat if stamp - start_ns >= (WINDOW_S - 0.5) * NS]
-    row = {"rate_hz_per_sensor": rate_hz, "refine": refine, "cpu_pct": round(cpu, 1), "estimates": len(lat),
+    row = {"rate_hz_per_sensor": rate_hz, "refine": refine, **({"drive_cycle": cycle} if cycle else {}),
+           "cpu_pct": round(cpu, 1), "estimates": len(lat),
            **_medians(lat, pipe, list(lat), ""),
            "update_latency_ms_max": round(max(lat.values()), 1) if lat else None,
            "taken": out["taken"], "published": out["sent"]}
@@ -294,6 +311,8 @@ def run_node_bench(quick: bool = False) -> dict[str, Any]:
         "at_2x100hz": bench_cpu_and_latency(domain, 100.0, steady_s),
         "at_2x1khz": bench_cpu_and_latency(domain, 1000.0, run_s),
         "at_2x1khz_rozyn_only": bench_cpu_and_latency(domain, 1000.0, run_s, refine="none"),
+        # in town: the first 3 (quick: 2) minutes of udds, its 20 s idle start and 4 stops
+        "urban_at_2x100hz": bench_cpu_and_latency(domain, 100.0, 120.0 if quick else 180.0, cycle="udds"),
         "rss": bench_rss(domain, sim_s=120.0 if quick else 600.0),
         # update_latency_ms: Rozyn's stage only; the refined one at 2 x 100 Hz: 40 ms
         "goals": {"rate_hz_per_sensor": 1000, "cpu_pct_at_2x1khz": 25.0, "update_latency_ms": 20.0,
