@@ -22,7 +22,7 @@ channels through :func:`rozyn_estimator.body_model.half_car_sensor_rows`.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -136,6 +136,31 @@ def _sensor(name: str, entry: Any, where: str) -> Sensor:
     return Sensor(name, topic.strip(), position[0], position[1], tuple(channels))
 
 
+SENSOR_PARAMETER_PREFIX = "vehicle.sensors."
+SENSORS_PARAMETER_HELP = ("the sensors block's sensor names (a parameter file's nested vehicle: sensors: "
+                          "block; each name's topic, x_m, y_m, channels as vehicle.sensors.<name>.*; empty: "
+                          "front and rear accelerometers)")
+
+
+def sensor_parameter_names(names: Sequence[str]) -> list[str]:
+    """The flat ROS parameter names of a sensors block with sensors ``names`` (a parameter
+    file's nested ``vehicle: sensors: …`` arrives as these)."""
+    return [f"{SENSOR_PARAMETER_PREFIX}{n}.{key}" for n in names for key in _SENSOR_KEYS]
+
+
+def sensors_from_parameters(values: Mapping[str, Any]) -> SensorSet | None:
+    """The sensors block of flat ROS values (``vehicle.sensors.names`` and, per name,
+    ``vehicle.sensors.<name>.topic`` …; values not set are None); None without names."""
+    names = values.get(f"{SENSOR_PARAMETER_PREFIX}names")
+    if names is None or (isinstance(names, list | tuple) and not names):
+        return None
+    block: dict[str, Any] = {"names": list(names) if isinstance(names, list | tuple) else names}
+    for n in block["names"] if isinstance(block["names"], list) else []:
+        entry = {key: values.get(f"{SENSOR_PARAMETER_PREFIX}{n}.{key}") for key in _SENSOR_KEYS}
+        block[n] = {k: list(v) if isinstance(v, tuple) else v for k, v in entry.items() if v is not None}
+    return sensors_from_mapping(block, "vehicle parameters")
+
+
 def half_car_channels(sensors: SensorSet, wheelbase_m: float) -> tuple[Channel, Channel]:
     """The two channels the half car fits, accelerometer first; ConfigError (one line naming
     what is missing) for a set that cannot identify the mass, the pitch inertia and the CoG.
@@ -174,5 +199,16 @@ def half_car_channels(sensors: SensorSet, wheelbase_m: float) -> tuple[Channel, 
     return front, rear
 
 
-__all__ = ["CHANNEL_FIELDS", "CHANNEL_UNITS", "Channel", "Sensor", "SensorSet", "half_car_channels",
-           "sensors_from_mapping"]
+__all__ = [
+    "CHANNEL_FIELDS",
+    "CHANNEL_UNITS",
+    "SENSORS_PARAMETER_HELP",
+    "SENSOR_PARAMETER_PREFIX",
+    "Channel",
+    "Sensor",
+    "SensorSet",
+    "half_car_channels",
+    "sensor_parameter_names",
+    "sensors_from_mapping",
+    "sensors_from_parameters",
+]

@@ -22,7 +22,13 @@ import yaml
 
 from rozyn_estimator.errors import ConfigError, RozynError
 from rozyn_estimator.parameters import build, check, param, spec_of
-from rozyn_estimator.sensors import Channel, SensorSet, half_car_channels, sensors_from_mapping
+from rozyn_estimator.sensors import (
+    Channel,
+    SensorSet,
+    half_car_channels,
+    sensors_from_mapping,
+    sensors_from_parameters,
+)
 from rozyn_estimator.tolerances import Tolerances
 
 
@@ -354,7 +360,8 @@ def vehicle_from_parameters(values: Mapping[str, Any]) -> Vehicle:
     if values.get("vehicle_file"):
         return load_vehicle(values["vehicle_file"])
     vehicle: Vehicle = build(Vehicle(), {k: v for k, v in values.items() if k.startswith("vehicle.")})
-    return vehicle
+    sensors = sensors_from_parameters(values)  # vehicle.sensors.* (a parameter file's sensors block)
+    return vehicle if sensors is None else vehicle.with_sensors(sensors)
 
 
 def config_from_parameters(default: Any, values: Mapping[str, Any]) -> Any:

@@ -320,6 +320,9 @@ def any_vehicle_from_parameters(values: Mapping[str, Any]) -> Vehicle | FullVehi
                               "file says model: full)")
         return vehicle
     if model == "full":
+        if values.get("vehicle.sensors.names"):
+            raise ConfigError("vehicle.sensors: the full car reads its four corner accelerometers; a sensors "
+                              "block (an IMU) is the half car's so far")
         given = {k: v for k, v in values.items() if k.startswith("vehicle.")}
         full: FullVehicle = build(FullVehicle(), given)
         return full

@@ -340,3 +340,34 @@ def test_parameter_files_configure_both_nodes():
         sim.destroy_node()
     finally:
         rclpy.shutdown(context=ctx)
+
+
+def test_a_parameter_file_with_a_sensors_block_configures_both_nodes(tmp_path):
+    """config/vehicle_imu.yaml as a parameter file: its nested sensors block arrives as flat
+    ``vehicle.sensors.*`` parameters, and both nodes read one IMU; a full car refuses it."""
+    ctx = Context()
+    files = ["--params-file", str(ROOT / "config" / "vehicle_imu.yaml")]
+    rclpy.init(args=["--ros-args", *files], context=ctx, domain_id=DOMAIN + 4)
+    try:
+        est = EstimatorNode(context=ctx)
+        sim = SimNode(context=ctx)
+        assert est.config.sensors == (("imu.accel_z", "/imu/data"), ("imu.gyro_y", "/imu/data"))
+        assert est.config.fields == ("linear_acceleration.z", "angular_velocity.y")
+        assert sim.config.channels == ("imu.accel_z", "imu.gyro_y")
+        assert est.online.vehicle == sim.config.vehicle and est.online.vehicle.sensor_x_m == (1.5, 1.5)
+        est.destroy_node()
+        sim.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("/**:\n  ros__parameters:\n    vehicle:\n      sensors:\n        names: [imu]\n"
+                   "        imu: {topic: /imu/data, x_m: 1, channels: [accel_z]}\n")
+    ctx = Context()
+    rclpy.init(args=["--ros-args", "--params-file", str(bad)], context=ctx, domain_id=DOMAIN + 4)
+    try:
+        with pytest.raises(ConfigError, match="sees heave but not pitch"):
+            EstimatorNode(context=ctx)
+        with pytest.raises(ConfigError, match="half car's so far"):
+            EstimatorNode(context=ctx, parameter_overrides=[Parameter("vehicle.model", value="full")])
+    finally:
+        rclpy.shutdown(context=ctx)

@@ -24,6 +24,7 @@ from rozyn_estimator import parameters
 from rozyn_estimator.errors import ConfigError, RozynError
 from rozyn_estimator.parameters import Param
 from rozyn_estimator.ros.stop import StopRequest
+from rozyn_estimator.sensors import SENSOR_PARAMETER_PREFIX, SENSORS_PARAMETER_HELP, sensor_parameter_names
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import MODEL_PARAM, FullVehicle, load_any_vehicle
 
@@ -85,7 +86,23 @@ def declare_vehicle(node: Node) -> list[str]:
     parameters.coerce("vehicle.model", MODEL_PARAM, "half", values["vehicle.model"])
     full = values["vehicle.model"] == "full" or (
         bool(values["vehicle_file"]) and isinstance(load_any_vehicle(values["vehicle_file"]), FullVehicle))
-    return names + declare_config(node, FullVehicle() if full else Vehicle())
+    return names + declare_config(node, FullVehicle() if full else Vehicle()) + declare_sensors(node)
+
+
+def declare_sensors(node: Node) -> list[str]:
+    """Declare ``vehicle.sensors.names`` and, for each name it holds (from a parameter file's
+    nested ``vehicle: sensors:`` block), its ``topic``, ``x_m``, ``y_m`` and ``channels``
+    (dynamically typed: a file's 1 is as good as 1.0; unset: None). Returns their names."""
+    def declare(name: str, text: str) -> None:
+        node.declare_parameter(name, None, ParameterDescriptor(description=text, dynamic_typing=True,
+                                                               read_only=True))
+
+    declare(f"{SENSOR_PARAMETER_PREFIX}names", SENSORS_PARAMETER_HELP)
+    given = node.get_parameter(f"{SENSOR_PARAMETER_PREFIX}names").value
+    sensors = [str(n) for n in given] if isinstance(given, list | tuple) else []
+    for name in sensor_parameter_names(sensors):
+        declare(name, "a sensor of vehicle.sensors.names (rozyn_estimator.sensors)")
+    return [f"{SENSOR_PARAMETER_PREFIX}names", *sensor_parameter_names(sensors)]
 
 
 def values_of(node: Node, names: Iterable[str]) -> dict[str, Any]:

@@ -33,6 +33,7 @@ def node_parameters() -> dict[str, list[Flat]]:
     from rozyn_estimator.online import EstimatorConfig
     from rozyn_estimator.ros.estimator_node import NodeOptions
     from rozyn_estimator.ros.recorder_node import RecorderOptions
+    from rozyn_estimator.sensors import SENSORS_PARAMETER_HELP
     from rozyn_estimator.vehicle import Vehicle
     from rozyn_estimator.vehicle_full import MODEL_PARAM, FullVehicle
     from sim_node.node import NODE_DEFAULTS, SimNodeOptions
@@ -46,7 +47,8 @@ def node_parameters() -> dict[str, list[Flat]]:
         "estimator_node": [*flatten(NodeOptions()), *without_vehicle(EstimatorConfig()), VEHICLE_FILE],
         "sim_node": [*flatten(SimNodeOptions()), *without_vehicle(NODE_DEFAULTS), VEHICLE_FILE],
         "bag_recorder": flatten(RecorderOptions()),
-        "vehicle": [model, *flatten(Vehicle())],
+        "vehicle": [model, *flatten(Vehicle()),
+                    Flat("vehicle.sensors.names", [], Param(SENSORS_PARAMETER_HELP, read_only=True))],
         "vehicle_full": [model, *flatten(FullVehicle())],
     }
 
