@@ -187,3 +187,17 @@ def test_a_bag_of_one_imu_topic_replays_with_the_vehicle_file(tmp_path):
     assert published and result.accel_messages == y.shape[0]
     last = published[-1]
     assert np.all(np.abs(last.estimate.params - TRUTH) < 4 * last.estimate.std), last.estimate.params
+
+
+def test_a_gyro_with_the_wrong_sign_is_named_not_fitted():
+    """A pitch gyro read with the sign opposite to REP 103's is refused with the reason (fitted
+    anyway it read as a wrong speed, and Rozyn's stage as m +12 %); the right sign passes, also
+    with the vehicle file's values 20 % off."""
+    v = imu_vehicle()
+    y = Simulation(SimConfig(vehicle=v, seed=5, duration_s=120, speed_kmh=50)).run(120).accel_mps2
+    y = noisy(y, 0.1, 5)
+    flipped = estimate(y * np.array([1.0, -1.0]), 100.0, v, PipelineConfig(), speed_mps=50 / 3.6)
+    assert not flipped.ok and "imu.gyro_y reads the pitch rate with the sign opposite" in flipped.reason
+    told = v.replace(sprung_mass_kg=1200.0, pitch_inertia_kgm2=1600.0, cog_from_front_axle_m=1.4)
+    right = estimate(y, 100.0, told, PipelineConfig(), speed_mps=50 / 3.6)
+    assert right.ok, right.reason

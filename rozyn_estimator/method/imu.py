@@ -13,7 +13,9 @@ frequency; the stage's band (the body modes) is where it is smallest.
 from __future__ import annotations
 
 import numpy as np
+from scipy import signal
 
+from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
 from rozyn_estimator.vehicle import Vehicle
 
 
@@ -35,4 +37,33 @@ def stage_input(y: np.ndarray, fs_hz: float, vehicle: Vehicle) -> tuple[np.ndarr
     return y[:, :1] + (x - axles) * pitch_accel[:, None], stage_vehicle(vehicle)
 
 
-__all__ = ["stage_input", "stage_vehicle"]
+def gyro_sign_problem(y: np.ndarray, fs_hz: float, vehicle: Vehicle, speed_mps: float | None) -> str | None:
+    """Why an IMU's pitch gyro cannot be used (None: it can): it reads the pitch rate with the sign
+    opposite to REP 103's. The accelerometer/gyro cross-spectrum over the body modes (0.5-4 Hz)
+    is compared with the model's at the vehicle file's values: a flipped axis turns it half round
+    (a correlation of about -1, where the right sign gives +1). Fitted anyway, a flipped gyro
+    read as a speed 0.4x the topic's and Rozyn's stage as m +12 %, l_f +75 %."""
+    if not vehicle.pitch_gyro or not speed_mps or y.shape[0] < 8 * fs_hz:
+        return None
+    f, cross = signal.csd(y[:, 0], y[:, 1], fs=fs_hz, nperseg=min(y.shape[0], round(16 * fs_hz)))
+    band = (f >= 0.5) & (f <= 4.0)
+    if np.count_nonzero(band) < 8:
+        return None
+    model = HalfCarSpectrum(vehicle, f[band], fs_hz, float(speed_mps), aliases=0)
+    nominal = np.array([vehicle.sprung_mass_kg, vehicle.pitch_inertia_kgm2, vehicle.cog_from_front_axle_m])
+    S, _ = model.spectrum(model.theta(nominal, 1.0, np.full(2, 1e-12)), derivatives=False, smooth=False)
+    expected = np.conj(S[:, 0, 1])  # scipy's csd(x, y) is E[conj(X) Y]; the model's S01 E[Y0 conj(Y1)]
+    score = float(np.real(np.sum(np.conj(expected) * cross[band])) /
+                  max(np.sum(np.abs(expected) * np.abs(cross[band])), 1e-300))
+    if score > SIGN_SCORE:
+        return None
+    label = vehicle.channel_names[1]
+    return (f"{label} reads the pitch rate with the sign opposite to REP 103's (angular_velocity.y positive "
+            f"when the nose dips; its cross-spectrum with the accelerometer correlates {score:+.2f} with the "
+            "model's): check the IMU's frame (x forward, y left, z up)")
+
+
+SIGN_SCORE = -0.5  # the right sign correlates about +1 and noise about 0; a flipped axis about -1
+
+
+__all__ = ["SIGN_SCORE", "gyro_sign_problem", "stage_input", "stage_vehicle"]

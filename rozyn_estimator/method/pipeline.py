@@ -34,7 +34,7 @@ from rozyn_estimator.method.drive import constant_speed_only, varying_drive, win
 from rozyn_estimator.method.fit import axle_shapes, characteristic_matrix, fit_inertia
 from rozyn_estimator.method.glitches import GlitchError, gate_glitches
 from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
-from rozyn_estimator.method.imu import stage_input, stage_vehicle
+from rozyn_estimator.method.imu import gyro_sign_problem, stage_input, stage_vehicle
 from rozyn_estimator.method.likelihood import Refinement, refine
 from rozyn_estimator.method.load_transfer import carries_load_transfer, fit_without_load_transfer
 from rozyn_estimator.method.variance import jackknife_covariance
@@ -147,15 +147,15 @@ def estimate(
     Returns:
         An :class:`Estimate`; status ``failed`` with a reason when no honest number exists.
     """
-    cfg = config or PipelineConfig()
-    started = time.perf_counter()
-    speed, profile = window_speed(speed_mps)
-    accel = np.asarray(accel_mps2)
+    cfg, started = config or PipelineConfig(), time.perf_counter()
+    (speed, profile), accel = window_speed(speed_mps), np.asarray(accel_mps2)
     try:
         y, gated = checked_window(accel, fs_hz, cfg, vehicle.channel_names)
     except InputError as exc:
         return _failed(str(exc), int(accel.shape[0]) if accel.ndim >= 1 else 0, started)
-    if cfg.refine == "none" and (why := constant_speed_only(profile)):
+    rozyn_only = cfg.refine == "none"
+    why = gyro_sign_problem(y, fs_hz, vehicle, speed) or (rozyn_only and constant_speed_only(profile))
+    if why:
         return _failed(why, int(y.shape[0]), started)
     if cfg.refine == "none":
         est = _with_budget(_rozyn_stage(y, fs_hz, vehicle, cfg, speed, started), vehicle, cfg)
