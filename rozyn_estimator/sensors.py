@@ -136,6 +136,13 @@ def _sensor(name: str, entry: Any, where: str) -> Sensor:
     return Sensor(name, topic.strip(), position[0], position[1], tuple(channels))
 
 
+def unit_suffix(label: str) -> str:
+    """``radps`` for a gyro channel's label (``imu.gyro_y``), else ``mps2`` (accelerometers, and
+    the preset's ``front``/``rear``): for keys that carry a channel's unit."""
+    kind = label.rpartition(".")[2]
+    return "radps" if CHANNEL_UNITS.get(kind) == "rad/s" else "mps2"
+
+
 SENSOR_PARAMETER_PREFIX = "vehicle.sensors."
 SENSORS_PARAMETER_HELP = ("the sensors block's sensor names (a parameter file's nested vehicle: sensors: "
                           "block; each name's topic, x_m, y_m, channels as vehicle.sensors.<name>.*; empty: "

@@ -115,8 +115,9 @@ class Vehicle:
 
     @property
     def pitch_gyro(self) -> bool:
-        """The second channel is a pitch gyro (``gyro_y``), not an accelerometer."""
-        return self.sensors is not None and self.channels[1].kind == "gyro_y"
+        """The second channel is a pitch gyro (``gyro_y``), not an accelerometer (a valid block with
+        a gyro_y has it there: :func:`~rozyn_estimator.sensors.half_car_channels`)."""
+        return self.sensors is not None and any(c.kind == "gyro_y" for c in self.sensors.channels)
 
     def with_sensors(self, sensors: SensorSet | None) -> Vehicle:
         """A copy with the sensors of a ``sensors`` block: their positions become the offsets

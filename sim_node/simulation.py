@@ -167,9 +167,9 @@ class SimConfig:
     @property
     def gyros(self) -> np.ndarray:
         """(channels,) bool: which channels are gyros."""
-        if self.model == "full" or self.vehicle.sensors is None:
+        if self.model == "full":
             return np.zeros(len(self.channels), dtype=bool)
-        return np.array([c.kind != "accel_z" for c in self.vehicle.channels])
+        return halfcar.sensor_rates(self.vehicle)
 
     @property
     def n_state(self) -> int:

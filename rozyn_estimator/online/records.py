@@ -18,6 +18,7 @@ import numpy as np
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PARAM_NAMES, Estimate
 from rozyn_estimator.method.full import FULL_PARAM_NAMES, FullEstimate
+from rozyn_estimator.sensors import unit_suffix
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
 
@@ -214,6 +215,6 @@ def _refinement_values(ref: Any, channels: Sequence[str]) -> dict[str, str]:
     if ref is not None and ref.ok:
         out["road_waviness"] = f"{ref.waviness:.3f}"
         for c, noise in zip(channels, ref.noise_std_mps2, strict=False):
-            out[f"noise_std_{c}_{'radps' if '.gyro_' in c else 'mps2'}"] = f"{noise:.4g}"  # a gyro's in rad/s
+            out[f"noise_std_{c}_{unit_suffix(c)}"] = f"{noise:.4g}"  # a gyro's in rad/s
         out["refine_iterations"] = str(ref.iterations)
     return out
