@@ -15,6 +15,7 @@ a body point at ``(x, y)`` moves ``x_s + (lf - x) phi + (y - y_cog) theta``.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -139,6 +140,39 @@ def full_car_body_rows(v: FullVehicle, points_m: np.ndarray) -> np.ndarray:
 def full_car_sensor_points(v: FullVehicle) -> np.ndarray:
     """(4, 2) the accelerometers' ``(x, y)`` (FL, FR, RL, RR) [m]."""
     return np.column_stack([v.sensor_x_m, v.sensor_y_m])
+
+
+def full_car_sensor_rows(v: FullVehicle) -> np.ndarray:
+    """(k, 7) map from ``q`` to what the channels read: an accelerometer the body's vertical
+    motion at its point, ``gyro_y`` (REP 103: positive nose down) ``-phi``, ``gyro_x`` (left side
+    up) ``theta``; a gyro reads its row's rate (:func:`full_car_sensor_rates`)."""
+    kinds = v.channel_kinds
+    rows = full_car_body_rows(v, full_car_sensor_points(v)[: len(kinds)])
+    for i, kind in enumerate(kinds):
+        if kind != "accel_z":
+            rows[i] = 0.0
+            rows[i, FULL_PITCH if kind == "gyro_y" else FULL_ROLL] = -1.0 if kind == "gyro_y" else 1.0
+    return rows
+
+
+def full_car_sensor_rates(v: FullVehicle) -> np.ndarray:
+    """(k,) bool: the channel reads its row's rate (a gyro), not its acceleration."""
+    return np.array([kind != "accel_z" for kind in v.channel_kinds])
+
+
+def full_car_channel_rows(vehicle: FullVehicle, sensors: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
+    """((k, 3) each channel's row on the body's ``(z₀, φ, θ)`` (``z₀`` at the front axle's centre:
+    :mod:`rozyn_estimator.method.full.spectrum`), (k,) bool: the channel reads the
+    rate, a gyro). An accelerometer at ``(x, y)`` reads ``(1, -x, y)``; ``gyro_y`` (REP 103:
+    positive nose down; ``φ`` is nose up) ``(0, -1, 0)``; ``gyro_x`` (left side up) ``(0, 0, 1)``."""
+    kinds = [vehicle.channel_kinds[c] for c in sensors]
+    xs, ys = np.asarray(vehicle.sensor_x_m)[list(sensors)], np.asarray(vehicle.sensor_y_m)[list(sensors)]
+    rows = np.column_stack([np.ones(len(kinds)), -xs, ys])
+    rows[[kind != "accel_z" for kind in kinds]] = 0.0
+    for i, kind in enumerate(kinds):
+        if kind != "accel_z":
+            rows[i, 1 if kind == "gyro_y" else 2] = -1.0 if kind == "gyro_y" else 1.0
+    return rows, np.array([kind != "accel_z" for kind in kinds])
 
 
 def full_car_model(v: FullVehicle) -> SecondOrderModel:

@@ -26,6 +26,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from rozyn_estimator.errors import ConfigError
 
 CHANNEL_FIELDS: Mapping[str, str] = {
@@ -58,6 +60,7 @@ class Channel:
     kind: str  # accel_z, gyro_x or gyro_y
     topic: str  # the sensor's topic
     x_m: float  # the sensor's position behind the front axle [m]
+    y_m: float = 0.0  # its position left of the centreline [m]
 
     @property
     def field(self) -> str:
@@ -79,7 +82,8 @@ class SensorSet:
     @property
     def channels(self) -> tuple[Channel, ...]:
         """Every sensor's channels, sensor by sensor."""
-        return tuple(Channel(s.name, kind, s.topic, s.x_m) for s in self.sensors for kind in s.channels)
+        return tuple(Channel(s.name, kind, s.topic, s.x_m, s.y_m)
+                     for s in self.sensors for kind in s.channels)
 
     def to_dict(self) -> dict[str, Any]:
         """The block as a vehicle file holds it."""
@@ -89,9 +93,9 @@ class SensorSet:
         return out
 
     def describe(self) -> str:
-        """``imu (/imu/data, x 1.50 m): accel_z, gyro_y``: one line for a log."""
-        return "; ".join(f"{s.name} ({s.topic}, x {s.x_m:.2f} m): {', '.join(s.channels)}"
-                         for s in self.sensors)
+        """``imu (/imu/data, x 1.50 m): accel_z, gyro_y``: one line for a log (``y`` where not 0)."""
+        return "; ".join(f"{s.name} ({s.topic}, x {s.x_m:.2f} m{f', y {s.y_m:.2f} m' if s.y_m else ''}): "
+                         f"{', '.join(s.channels)}" for s in self.sensors)
 
 
 def sensors_from_mapping(data: Any, source: str = "sensors") -> SensorSet:
@@ -206,15 +210,85 @@ def half_car_channels(sensors: SensorSet, wheelbase_m: float) -> tuple[Channel, 
     return front, rear
 
 
+FULL_CAR_MAX_CHANNELS = 4
+
+
+def same_positions(given: Any, placed: Sequence[float]) -> bool:
+    """A file's positions (a list) are the ones its sensors block places."""
+    try:
+        return len(given) == len(placed) and all(abs(float(a) - b) <= 1e-9
+                                                 for a, b in zip(given, placed, strict=True))
+    except (TypeError, ValueError):
+        return False
+
+
+def full_car_channels(sensors: SensorSet, wheelbase_m: float, track_m: float) -> tuple[Channel, ...]:
+    """The channels the full car fits (every channel of the block, in its order); ConfigError
+    (one line naming what is missing) for a set that cannot identify heave, pitch and roll.
+
+    Each channel reads one motion of the rigid body ``(z, pitch, roll)``: an accelerometer at
+    ``(x, y)`` the acceleration of ``z - x pitch + y roll``, ``gyro_y`` the pitch rate,
+    ``gyro_x`` the roll rate. The set must see all three, each well apart: the rows, with ``x``
+    in wheelbases and ``y`` in tracks, must have a smallest singular value of at least 0.1
+    (two accelerometers a quarter wheelbase apart along the body and one a quarter track
+    across from their line pass). At most four channels (the full car's likelihood is built
+    for three or four).
+    """
+    chans = sensors.channels
+    if len(chans) > FULL_CAR_MAX_CHANNELS:
+        raise ConfigError(f"sensors: the full car fits three or four channels, got {len(chans)}: "
+                          f"{', '.join(c.label for c in chans)}")
+    accels = [c for c in chans if c.kind == "accel_z"]
+    if not accels:
+        raise ConfigError("sensors: gyros see pitch and roll but not heave, so not the mass: add an accel_z "
+                          "channel")
+    rows = []
+    for c in chans:
+        rows.append({"accel_z": (1.0, -c.x_m / wheelbase_m, c.y_m / track_m), "gyro_y": (0.0, 1.0, 0.0),
+                     "gyro_x": (0.0, 0.0, 1.0)}[c.kind])
+    missing, named = _unseen_motion(rows), ", ".join(c.label for c in chans)
+    if missing == "pitch":
+        raise ConfigError(f"sensors: {named} see heave but not pitch: add a gyro_y "
+                          "channel or accelerometers a quarter wheelbase apart along the body")
+    if missing == "roll":
+        raise ConfigError(f"sensors: {named} see heave but not roll: add a gyro_x "
+                          "channel or an accelerometer a quarter track across from the others")
+    if missing == "both":
+        raise ConfigError(f"sensors: {named} see heave but neither pitch nor roll: "
+                          "add gyro_x and gyro_y channels, or accelerometers apart along and across the body")
+    if missing:
+        raise ConfigError(f"sensors: {named} do not tell heave, pitch and roll "
+                          "apart: place the accelerometers further apart or add gyro_x and gyro_y")
+    return chans
+
+
+def _unseen_motion(rows: list[tuple[float, float, float]]) -> str:
+    """``pitch``/``roll`` when the rows (scaled as :func:`full_car_channels`) miss one of them,
+    ``both``/``mixed`` when they cannot tell the motions apart otherwise, else empty."""
+    a = np.asarray(rows, dtype=float)
+    if np.linalg.svd(a, compute_uv=False).min(initial=np.inf) >= 0.1 and a.shape[0] >= 3:
+        return ""
+    heave_pitch = np.linalg.matrix_rank(a[:, :2], tol=0.1) == 2
+    heave_roll = np.linalg.matrix_rank(a[:, [0, 2]], tol=0.1) == 2
+    if not heave_pitch and heave_roll:
+        return "pitch"
+    if heave_pitch and not heave_roll:
+        return "roll"
+    return "mixed" if heave_pitch else "both"
+
+
 __all__ = [
     "CHANNEL_FIELDS",
     "CHANNEL_UNITS",
+    "FULL_CAR_MAX_CHANNELS",
     "SENSORS_PARAMETER_HELP",
     "SENSOR_PARAMETER_PREFIX",
     "Channel",
     "Sensor",
     "SensorSet",
+    "full_car_channels",
     "half_car_channels",
+    "same_positions",
     "sensor_parameter_names",
     "sensors_from_mapping",
     "sensors_from_parameters",

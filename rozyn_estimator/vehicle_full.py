@@ -1,8 +1,5 @@
-"""Vehicle parameters of the 7-DOF full car and their YAML loading.
-
-The full car's data module, beside the half car's :mod:`rozyn_estimator.vehicle` (which it
-reuses: YAML safety, messages, tolerances). Shared by the plant (:mod:`sim_node.fullcar`)
-and, later, the full-car estimator.
+"""Vehicle parameters of the 7-DOF full car and their YAML loading (the half car's
+:mod:`rozyn_estimator.vehicle` reused: YAML safety, messages, tolerances, the sensors block).
 
 Coordinates and signs:
 
@@ -39,8 +36,18 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, ClassVar
 
+import yaml
+
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.parameters import Param, build, check, param, spec_of
+from rozyn_estimator.sensors import (
+    Channel,
+    SensorSet,
+    full_car_channels,
+    same_positions,
+    sensors_from_mapping,
+    sensors_from_parameters,
+)
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.vehicle import (
     HEIGHTS_RULE,
@@ -139,6 +146,9 @@ class FullVehicle:
                                          "0: not given)", unit="m", low=0.0)
     tolerances: FullTolerances = param(description="standard uncertainties of the assumed values",
                                        default_factory=FullTolerances)
+    # the sensors block (rozyn_estimator.sensors; None: the four corner accelerometers). Its
+    # channels take sensor_x_m/sensor_y_m's first slots (with_sensors): the budget perturbs those.
+    sensors: SensorSet | None = dataclasses.field(default=None)
 
     def __post_init__(self) -> None:
         check(self, _RULES)
@@ -160,6 +170,47 @@ class FullVehicle:
         return (f, -f, r, -r)
 
     @property
+    def channels(self) -> tuple[Channel, ...]:
+        """The four corner accelerometers (named for their corners), or a sensors block's channels
+        (:func:`~rozyn_estimator.sensors.full_car_channels`) at their slots of ``sensor_x_m``/``_y_m``."""
+        if self.sensors is None:
+            return tuple(Channel(c, "accel_z", "", x, y)
+                         for c, x, y in zip(CORNERS, self.sensor_x_m, self.sensor_y_m, strict=True))
+        chans = full_car_channels(self.sensors, self.wheelbase_m, self.track_front_m)
+        return tuple(dataclasses.replace(c, x_m=self.sensor_x_m[i], y_m=self.sensor_y_m[i])
+                     for i, c in enumerate(chans))
+
+    @property
+    def channel_names(self) -> tuple[str, ...]:  # how messages name the channels: corners or labels
+        return CORNERS if self.sensors is None else tuple(c.label for c in self.channels)
+
+    @property
+    def channel_kinds(self) -> tuple[str, ...]:  # each slot's channel: accel_z, gyro_x or gyro_y
+        return ("accel_z",) * 4 if self.sensors is None else tuple(c.kind for c in self.channels)
+
+    @property
+    def channel_late(self) -> tuple[bool, ...]:
+        """Each slot's channel runs on the clock the timing tolerance (``sensor_time_offset_s``)
+        puts late: the rear corners', or a block's sensors but the first (one IMU: none)."""
+        if self.sensors is None:
+            return (False, False, True, True)
+        first = self.sensors.sensors[0].name
+        return tuple(c.sensor != first for c in self.channels)
+
+    def with_sensors(self, sensors: SensorSet | None) -> FullVehicle:
+        """A copy with a ``sensors`` block: channel ``i`` at slot ``i`` of ``sensor_x_m``/``_y_m``
+        (the rest repeat the last); one sensor has one clock (no timing tolerance)."""
+        if sensors is None:
+            return self.replace(sensors=None)
+        chans = full_car_channels(sensors, self.wheelbase_m, self.track_front_m)
+        slots = [*chans, *[chans[-1]] * (4 - len(chans))]
+        tolerances = self.tolerances
+        if len(sensors.sensors) == 1:
+            tolerances = dataclasses.replace(tolerances, sensor_time_offset_s=0.0)
+        return self.replace(sensors=sensors, sensor_x_m=tuple(c.x_m for c in slots),
+                            sensor_y_m=tuple(c.y_m for c in slots), tolerances=tolerances)
+
+    @property
     def is_symmetric(self) -> bool:
         """Left and right alike (values, CoG on the centreline): heave and pitch do not couple
         with roll, and :func:`centreline_half_car` is exact."""
@@ -179,6 +230,8 @@ class FullVehicle:
             value = getattr(self, name)
             out[name] = [float(x) for x in value] if isinstance(value, tuple) else float(value)
         out["tolerances"] = self.tolerances.to_dict()
+        if self.sensors is not None:
+            out["sensors"] = self.sensors.to_dict()
         return out
 
 
@@ -195,10 +248,12 @@ _RULES = (
      "must lie between the axles (0 < lf < wheelbase_m)"),
     ("cog_lateral_m", lambda v: abs(v.cog_lateral_m) < 0.5 * min(v.track_front_m, v.track_rear_m),
      "must lie between the wheels (|y_cog| < half the narrower track)"),
-    ("sensor_x_m", lambda v: _spans(v)[0] >= 0.25 * v.wheelbase_m,
+    ("sensors", lambda v: v.sensors is None or (isinstance(v.sensors, SensorSet) and bool(v.channels)),
+     "must be a sensors block the full car can use (rozyn_estimator.sensors)"),
+    ("sensor_x_m", lambda v: v.sensors is not None or _spans(v)[0] >= 0.25 * v.wheelbase_m,
      "the rear accelerometers (RL, RR) must sit on average at least a quarter wheelbase behind the front "
      "ones (FL, FR) to see pitch"),
-    ("sensor_y_m", lambda v: _spans(v)[1] >= 0.25 * v.track_front_m,
+    ("sensor_y_m", lambda v: v.sensors is not None or _spans(v)[1] >= 0.25 * v.track_front_m,
      "the left accelerometers (FL, RL) must sit on average at least a quarter front track left of the right "
      "ones (FR, RR) to see roll"),
 )
@@ -223,9 +278,9 @@ def centreline_half_car(v: FullVehicle) -> Vehicle:
         ConfigError: ``v`` is not symmetric (then heave and pitch couple with roll and no
             half car describes them).
     """
-    if not v.is_symmetric:
+    if not v.is_symmetric or v.sensors is not None:
         raise ConfigError("vehicle: a centreline half car needs a symmetric full car (equal left and right "
-                          "corners, cog_lateral_m 0)")
+                          "corners, cog_lateral_m 0) with its corner accelerometers")
 
     def axles(values: Quad) -> tuple[float, float]:
         return values[0] + values[1], values[2] + values[3]
@@ -258,10 +313,9 @@ def full_vehicle_from_mapping(data: Mapping[str, Any], *, source: str = "vehicle
     if model != "full":
         raise ConfigError(f"{source}: model: expected full for a full-car vehicle, got "
                           f"{one_line(repr(model))}")
-    if "sensors" in values:
-        raise ConfigError(f"{source}: sensors: the full car reads its four corner accelerometers "
-                          "(sensor_x_m, sensor_y_m and the corner topics); a sensors block (an IMU) is the "
-                          "half car's so far")
+    sensors = sensors_from_mapping(values.pop("sensors"), source) if "sensors" in values else None
+    slots = {k: values.pop(k) for k in ("sensor_x_m", "sensor_y_m")
+             if sensors is not None and k in values}  # the block places them (a written file's agree)
     unknown = sorted(str(k) for k in set(values) - {*FULL_FIELD_UNITS, "tolerances"})
     if unknown:
         raise ConfigError(f"{source}: unknown full-car vehicle parameter(s) {_listed(unknown)}; known: "
@@ -269,7 +323,13 @@ def full_vehicle_from_mapping(data: Mapping[str, Any], *, source: str = "vehicle
     try:
         if "tolerances" in values:
             values["tolerances"] = FullTolerances.from_mapping(values["tolerances"], source)
-        return FullVehicle(**values)
+        if sensors is None:
+            return FullVehicle(**values)
+        placed = FullVehicle(**values).with_sensors(sensors)
+        if any(not same_positions(v, getattr(placed, k)) for k, v in slots.items()):
+            raise ConfigError(f"{source}: give the sensors' positions in the sensors block or as "
+                              "sensor_x_m/sensor_y_m, not both")
+        return placed
     except ConfigError as exc:
         raise ConfigError(one_line(str(exc) if str(exc).startswith(source) else f"{source}: {exc}")) from None
 
@@ -320,12 +380,11 @@ def any_vehicle_from_parameters(values: Mapping[str, Any]) -> Vehicle | FullVehi
                               "file says model: full)")
         return vehicle
     if model == "full":
-        if values.get("vehicle.sensors.names"):
-            raise ConfigError("vehicle.sensors: the full car reads its four corner accelerometers; a sensors "
-                              "block (an IMU) is the half car's so far")
-        given = {k: v for k, v in values.items() if k.startswith("vehicle.")}
+        given = {k: v for k, v in values.items() if k.startswith("vehicle.") and
+                 not k.startswith("vehicle.sensors.")}
         full: FullVehicle = build(FullVehicle(), given)
-        return full
+        sensors = sensors_from_parameters(values)  # vehicle.sensors.* (a parameter file's sensors block)
+        return full if sensors is None else full.with_sensors(sensors)
     return vehicle_from_parameters(values)
 
 
@@ -351,7 +410,9 @@ def dump_full_vehicle(v: FullVehicle) -> str:
         lines.append(f"{key}: {shown}  # {unit}")
     lines.append("tolerances:  # standard uncertainties: shares of the values, or m, or s")
     lines += [f"  {k}: {value!r}" for k, value in v.tolerances.to_dict().items()]
-    return "\n".join(lines) + "\n"
+    text = "\n".join(lines) + "\n"
+    block = {"sensors": v.sensors.to_dict()} if v.sensors is not None else None
+    return text if block is None else text + yaml.safe_dump(block, sort_keys=False)
 
 
 __all__ = ["CORNERS", "FULL_FIELD_UNITS", "MODEL_PARAM", "FullTolerances", "FullVehicle",

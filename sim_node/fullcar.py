@@ -45,6 +45,8 @@ from rozyn_estimator.body_model import FULL_ROLL as ROLL
 from rozyn_estimator.body_model import full_car_body_rows as body_rows
 from rozyn_estimator.body_model import full_car_model as second_order_model
 from rozyn_estimator.body_model import full_car_sensor_points as sensor_points
+from rozyn_estimator.body_model import full_car_sensor_rates as sensor_rates
+from rozyn_estimator.body_model import full_car_sensor_rows as sensor_rows
 from rozyn_estimator.body_model import full_car_suspension_rows as suspension_rows
 from rozyn_estimator.vehicle_full import FullVehicle
 from sim_node.departures import SuspensionLaw
@@ -56,9 +58,10 @@ N_STATE = 2 * N_DOF
 
 def state_space(v: FullVehicle, points_m: np.ndarray | None = None) -> StateSpace:
     """Continuous state space, road displacement (FL, FR, RL, RR) in, the body's vertical
-    acceleration at ``points_m`` (k, 2) out (default: the vehicle's accelerometers)."""
-    points = sensor_points(v) if points_m is None else points_m
-    return state_space_of(second_order_model(v), body_rows(v, points))
+    acceleration at ``points_m`` (k, 2) out (default: the vehicle's channels)."""
+    if points_m is None:
+        return state_space_of(second_order_model(v), sensor_rows(v), sensor_rates(v))
+    return state_space_of(second_order_model(v), body_rows(v, points_m))
 
 
 def static_state(v: FullVehicle, road_m: np.ndarray) -> np.ndarray:
@@ -75,7 +78,8 @@ class FullCarPlant(SuspendedPlant):
         x0: initial physical state ``[q, q']`` (14,) (default: at rest, zero road).
         u0: road displacement (FL, FR, RL, RR) at the first step, for the state shift [m].
         points_m: (k, 2) body points ``(x, y)`` whose vertical acceleration is the output
-            (default: the vehicle's four accelerometers, FL, FR, RL, RR).
+            (default: the vehicle's channels: the four accelerometers, FL, FR, RL, RR, or a
+            sensors block's, its gyros reading rates).
         suspension: the suspension's nonlinear part, per corner (None: linear).
         delays_s: each output's delay behind its step [s], >= 0 (empty: none).
 
@@ -89,9 +93,11 @@ class FullCarPlant(SuspendedPlant):
                  u0: np.ndarray | None = None, points_m: np.ndarray | None = None,
                  suspension: SuspensionLaw | None = None, delays_s: Sequence[float] = ()) -> None:
         self.vehicle = vehicle
-        points = sensor_points(vehicle) if points_m is None else points_m
-        super().__init__(second_order_model(vehicle), body_rows(vehicle, points), suspension_rows(vehicle),
-                         dt_s, x0=x0, u0=u0, suspension=suspension, delays_s=delays_s, what="full-car")
+        rows = sensor_rows(vehicle) if points_m is None else body_rows(vehicle, points_m)
+        rates = sensor_rates(vehicle) if points_m is None else None
+        super().__init__(second_order_model(vehicle), rows, suspension_rows(vehicle),
+                         dt_s, x0=x0, u0=u0, suspension=suspension, delays_s=delays_s, what="full-car",
+                         rates=rates)
 
 
 def free_decay(vehicle: FullVehicle, x0: np.ndarray, dt_s: float, n: int) -> np.ndarray:
@@ -105,5 +111,5 @@ def natural_modes(v: FullVehicle) -> tuple[np.ndarray, np.ndarray]:
 
 
 __all__ = ["HEAVE", "N_DOF", "N_STATE", "N_TYRES", "PITCH", "ROLL", "FullCarPlant", "body_rows", "free_decay",
-           "natural_modes", "second_order_model", "sensor_points", "state_space", "static_state",
-           "suspension_rows"]
+           "natural_modes", "second_order_model", "sensor_points", "sensor_rates", "sensor_rows",
+           "state_space", "static_state", "suspension_rows"]

@@ -172,13 +172,14 @@ class SimNode(Node):
         per channel (front, rear; the full car's corners), or each sensor of the vehicle's
         sensors block with all its channels in one message (an IMU's accel_z and gyro_y)."""
         o, cfg = self.options, self.config
-        if cfg.model == "full" or cfg.vehicle.sensors is None:
+        block = cfg.plant_vehicle.sensors
+        if block is None:
             return [(self.create_publisher(Imu, getattr(o, f"{c}_topic"), qos),
                      self._imu_template(getattr(o, f"{c}_frame_id"), gyro=False),
                      [(k, "linear_acceleration", "z")]) for k, c in enumerate(cfg.channels)]
         labels = cfg.channels
         outlets: list[tuple[Any, Imu, list[tuple[int, str, str]]]] = []
-        for sensor in cfg.vehicle.sensors.sensors:
+        for sensor in block.sensors:
             columns = []
             for kind in sensor.channels:
                 if f"{sensor.name}.{kind}" in labels:

@@ -21,14 +21,14 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, cast
 
 import numpy as np
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.parameters import check, param
 from rozyn_estimator.vehicle import Vehicle
-from rozyn_estimator.vehicle_full import CORNERS, MODELS, FullVehicle
+from rozyn_estimator.vehicle_full import MODELS, FullVehicle
 from sim_node import fullcar, halfcar
 from sim_node.departures import Departures
 from sim_node.drive_cycle import DriveCycle, load_drive_cycle
@@ -161,14 +161,14 @@ class SimConfig:
         """The channels, in the order of a block's columns: the accelerometers, or a sensors
         block's channels (``imu.accel_z``, ``imu.gyro_y``)."""
         if self.model == "full":
-            return CORNERS
+            return cast(FullVehicle, self.plant_vehicle).channel_names
         return HALF_CHANNELS if self.vehicle.sensors is None else self.vehicle.channel_names
 
     @property
     def gyros(self) -> np.ndarray:
         """(channels,) bool: which channels are gyros."""
         if self.model == "full":
-            return np.zeros(len(self.channels), dtype=bool)
+            return fullcar.sensor_rates(cast(FullVehicle, self.plant_vehicle))
         return halfcar.sensor_rates(self.vehicle)
 
     @property
@@ -218,8 +218,8 @@ class Simulation:
         u0 = self._road_at(np.array([self._step]))[0]
         self._build_plants(vehicle, self._initial_state(u0), u0)
         gyros = cfg.gyros
-        bias = (0.0,) * len(CORNERS) if isinstance(vehicle, FullVehicle) else \
-            tuple(np.where(gyros, cfg.gyro_bias_radps, cfg.bias_mps2))
+        bias = tuple(np.where(gyros, cfg.gyro_bias_radps, 0.0 if isinstance(vehicle, FullVehicle) else
+                              cfg.bias_mps2))
         self.sensors = Accelerometers(cfg.departures, 1.0 / self._dt, bias, cfg.include_gravity,
                                       full_car=isinstance(vehicle, FullVehicle), gyros=gyros)
         self._noise_std = np.where(gyros, cfg.gyro_noise_std_radps, cfg.noise_std_mps2)
@@ -233,7 +233,7 @@ class Simulation:
         if isinstance(vehicle, FullVehicle):
             self.plant = fullcar.FullCarPlant(vehicle, self._dt, x0=x0, u0=u0,
                                               suspension=cfg.departures.suspension(vehicle),
-                                              delays_s=cfg.departures.corner_delays_s)
+                                              delays_s=cfg.departures.corner_delays_s[: len(cfg.channels)])
         else:  # a load change keeps the sensors: the loaded vehicle is built on the configured one
             self.plant = HalfCarPlant(vehicle, self._dt, x0=x0, u0=u0,
                                       suspension=cfg.departures.suspension(vehicle),
@@ -257,9 +257,10 @@ class Simulation:
             return None
         accel0 = float(self.acceleration_at(np.array(self._step * self._dt)))
         if isinstance(vehicle, FullVehicle):
-            model, rows, pitch = fullcar.second_order_model(vehicle), fullcar.body_rows(
-                vehicle, fullcar.sensor_points(vehicle)), fullcar.PITCH
-            corners, delays = fullcar.suspension_rows(vehicle), cfg.departures.corner_delays_s
+            model, rows, pitch = fullcar.second_order_model(vehicle), fullcar.sensor_rows(vehicle), \
+                fullcar.PITCH
+            corners = fullcar.suspension_rows(vehicle)
+            delays = cfg.departures.corner_delays_s[: rows.shape[0]]
         else:
             model, rows, pitch = halfcar.second_order_model(vehicle), halfcar.sensor_rows(vehicle), 3
             corners, delays = halfcar.suspension_rows(vehicle), cfg.departures.delays_s

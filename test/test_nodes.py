@@ -344,7 +344,8 @@ def test_parameter_files_configure_both_nodes():
 
 def test_a_parameter_file_with_a_sensors_block_configures_both_nodes(tmp_path):
     """config/vehicle_imu.yaml as a parameter file: its nested sensors block arrives as flat
-    ``vehicle.sensors.*`` parameters, and both nodes read one IMU; a full car refuses it."""
+    ``vehicle.sensors.*`` parameters, and both nodes read one IMU; so they do a full car's
+    (config/vehicle_full_imu.yaml); a set that cannot see the body is refused."""
     ctx = Context()
     files = ["--params-file", str(ROOT / "config" / "vehicle_imu.yaml")]
     rclpy.init(args=["--ros-args", *files], context=ctx, domain_id=DOMAIN + 4)
@@ -359,6 +360,20 @@ def test_a_parameter_file_with_a_sensors_block_configures_both_nodes(tmp_path):
         sim.destroy_node()
     finally:
         rclpy.shutdown(context=ctx)
+    ctx = Context()
+    files = ["--params-file", str(ROOT / "config" / "vehicle_full_imu.yaml")]
+    rclpy.init(args=["--ros-args", *files], context=ctx, domain_id=DOMAIN + 4)
+    try:
+        est, sim = EstimatorNode(context=ctx), SimNode(context=ctx)
+        labels = ("imu.accel_z", "imu.gyro_x", "imu.gyro_y")
+        assert est.config.sensors == tuple((label, "/imu/data") for label in labels)
+        assert est.config.fields == ("linear_acceleration.z", "angular_velocity.x", "angular_velocity.y")
+        assert sim.config.channels == labels and est.config.model == "full"
+        assert est.online.vehicle == sim.config.plant_vehicle and est.online.vehicle.sensor_y_m[0] == 0.2
+        est.destroy_node()
+        sim.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
     bad = tmp_path / "bad.yaml"
     bad.write_text("/**:\n  ros__parameters:\n    vehicle:\n      sensors:\n        names: [imu]\n"
                    "        imu: {topic: /imu/data, x_m: 1, channels: [accel_z]}\n")
@@ -367,7 +382,7 @@ def test_a_parameter_file_with_a_sensors_block_configures_both_nodes(tmp_path):
     try:
         with pytest.raises(ConfigError, match="sees heave but not pitch"):
             EstimatorNode(context=ctx)
-        with pytest.raises(ConfigError, match="half car's so far"):
+        with pytest.raises(ConfigError, match="see heave but neither pitch nor roll"):
             EstimatorNode(context=ctx, parameter_overrides=[Parameter("vehicle.model", value="full")])
     finally:
         rclpy.shutdown(context=ctx)

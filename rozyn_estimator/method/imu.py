@@ -1,4 +1,5 @@
-"""An IMU's accelerometer and pitch gyro as the two vertical accelerations Rozyn's stage reads.
+"""An IMU's accelerometer and pitch gyro as the two vertical accelerations Rozyn's stage reads
+(the full car's: :mod:`rozyn_estimator.method.full.imu`).
 
 Rozyn's stage (the thesis' method) identifies the body's modes from two vertical
 accelerations. An IMU gives one vertical acceleration ``a(x)`` at its position and the pitch

@@ -39,9 +39,9 @@ from scipy.signal import butter, sosfiltfilt
 from rozyn_estimator.body_model import (
     FULL_PITCH,
     HALF_PITCH,
-    full_car_body_rows,
     full_car_model,
-    full_car_sensor_points,
+    full_car_sensor_rates,
+    full_car_sensor_rows,
     half_car_model,
     half_car_sensor_rates,
     half_car_sensor_rows,
@@ -90,9 +90,9 @@ def load_transfer_mps2(vehicle: Vehicle | FullVehicle, accel_x_mps2: np.ndarray,
     ``accel_x_mps2`` (n,) (see the module's docstring)."""
     if isinstance(vehicle, FullVehicle):
         model, pitch = full_car_model(vehicle), FULL_PITCH
-        rows = full_car_body_rows(vehicle, full_car_sensor_points(vehicle))
-        rows = rows if columns is None else rows[list(columns)]
-        rates = np.zeros(rows.shape[0], dtype=bool)
+        rows, rates = full_car_sensor_rows(vehicle), full_car_sensor_rates(vehicle)  # a block's gyros: rates
+        if columns is not None:
+            rows, rates = rows[list(columns)], rates[list(columns)]
     else:
         model, rows, pitch = half_car_model(vehicle), half_car_sensor_rows(vehicle), HALF_PITCH
         rates = half_car_sensor_rates(vehicle)  # a gyro reads the rate: iω, not -ω²

@@ -110,9 +110,10 @@ class EstimatorConfig:
         """(channel, topic) of each channel in use: the half car's front and rear (or its
         vehicle's sensors block's channels, ``imu.accel_z`` …), or the full car's corners that
         have a topic (in ``front_left`` … ``rear_right`` order)."""
+        vehicle = self.model_vehicle
+        if vehicle.sensors is not None:  # the vehicle's sensors block names its topics
+            return tuple((c.label, c.topic) for c in vehicle.channels)
         if self.full_vehicle is None:
-            if self.vehicle.sensors is not None:  # the vehicle's sensors block names its topics
-                return tuple((c.label, c.topic) for c in self.vehicle.channels)
             return (("front", self.front_topic), ("rear", self.rear_topic))
         topics = (self.front_left_topic, self.front_right_topic, self.rear_left_topic, self.rear_right_topic)
         return tuple((c, t) for c, t in zip(CORNERS, topics, strict=True) if t)
@@ -121,8 +122,8 @@ class EstimatorConfig:
     def fields(self) -> tuple[str, ...]:
         """The ``sensor_msgs/Imu`` field each channel of :attr:`sensors` reads: ``field``, or a
         sensors block's channel's (``linear_acceleration.z``, ``angular_velocity.y``)."""
-        if self.full_vehicle is None and self.vehicle.sensors is not None:
-            return tuple(c.field for c in self.vehicle.channels)
+        if self.model_vehicle.sensors is not None:
+            return tuple(c.field for c in self.model_vehicle.channels)
         return (self.field,) * len(self.sensors)
 
     @classmethod
@@ -148,6 +149,10 @@ class EstimatorConfig:
         del data["vehicle"]["sensors"]  # as a vehicle file holds it, where given (as before, where not)
         if self.vehicle.sensors is not None:
             data["vehicle"]["sensors"] = self.vehicle.sensors.to_dict()
+        if self.full_vehicle is not None:
+            del data["full_vehicle"]["sensors"]
+            if self.full_vehicle.sensors is not None:
+                data["full_vehicle"]["sensors"] = self.full_vehicle.sensors.to_dict()
         return json.dumps(data, sort_keys=True)
 
     @classmethod
@@ -178,7 +183,14 @@ class EstimatorConfig:
         if full is None:
             return config
         where = "estimator configuration.full_vehicle"
-        return config.replace(full_vehicle=_from_dict(FullVehicle(), full, where, ignored))
+        full_block = full.pop("sensors", None) if isinstance(full, dict) else None
+        if full_block is not None:  # the block places its sensors
+            for key in ("sensor_x_m", "sensor_y_m"):
+                full.pop(key, None)
+        full_vehicle = _from_dict(FullVehicle(), full, where, ignored)
+        if full_block is not None:
+            full_vehicle = full_vehicle.with_sensors(sensors_from_mapping(full_block, where))
+        return config.replace(full_vehicle=full_vehicle)
 
 
 def _from_dict(default: Any, data: Any, where: str, ignored: list[str]) -> Any:

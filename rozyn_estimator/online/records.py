@@ -71,6 +71,11 @@ def layout_of(vehicle: Vehicle | FullVehicle, channels: Sequence[str] | None = N
         if channels is not None and tuple(channels) != names:
             raise ConfigError(f"a half car's channels are {' and '.join(names)}, got {', '.join(channels)}")
         return HALF_LAYOUT if names == HALF_CHANNELS else dataclasses.replace(HALF_LAYOUT, channels=names)
+    if vehicle.sensors is not None:  # a sensors block: its channels, all of them
+        labels = vehicle.channel_names
+        if channels is not None and tuple(channels) != labels:
+            raise ConfigError(f"this full car's channels are {', '.join(labels)}, got {', '.join(channels)}")
+        return Layout(FULL_PARAM_NAMES, labels, modes=3, positive=4)
     corners = CORNERS if channels is None else tuple(channels)
     if len(corners) not in (3, 4) or len(set(corners)) != len(corners) or not set(corners) <= set(CORNERS):
         raise ConfigError(f"a full car needs three or four distinct corners of {', '.join(CORNERS)}, got "

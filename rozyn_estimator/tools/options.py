@@ -10,7 +10,6 @@ import argparse
 from collections.abc import Sequence
 from typing import Any
 
-from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.sensors import Sensor, SensorSet
 from rozyn_estimator.vehicle import Vehicle
 
@@ -65,28 +64,31 @@ def add_vehicle_option(p: argparse.ArgumentParser) -> None:
 
 
 def add_sensors_option(p: argparse.ArgumentParser) -> None:
-    """``--sensors axles|imu``: where the half car's sensors are (:func:`with_sensor_preset`)."""
+    """``--sensors axles|imu``: where the sensors are (:func:`with_sensor_preset`)."""
     p.add_argument("--sensors", choices=SENSOR_PRESETS, default=None,
-                   help="the half car's sensors: axles, two accelerometers at the vehicle's offsets; imu, "
-                        f"one IMU (accel_z and gyro_y on /imu/data) {IMU_BEHIND_COG_M:g} m behind the CoG "
-                        "(default: the vehicle file's sensors block, else axles)")
+                   help="axles: the accelerometers at the vehicle's offsets (the full car's at its corners); "
+                        f"imu: one IMU on /imu/data {IMU_BEHIND_COG_M:g} m behind the CoG (accel_z, gyro_y; "
+                        f"the full car's {IMU_LEFT_OF_COG_M:g} m left of it too, with gyro_x) (default: the "
+                        "vehicle file's sensors block, else axles)")
 
 
 SENSOR_PRESETS = ("axles", "imu")
 IMU_BEHIND_COG_M = 0.3  # a production car's IMU sits near the CoG (the ESC's or the airbag unit's)
+IMU_LEFT_OF_COG_M = 0.2  # the full car's: off the centreline, where it sees roll in its accel_z too
 
 
 def with_sensor_preset(vehicle: Any, preset: str | None) -> Any:
-    """``vehicle`` with ``--sensors``' preset (None: as it is); ConfigError for the full car."""
+    """``vehicle`` (a half or a full car) with ``--sensors``' preset (None: as it is)."""
     if preset is None:
         return vehicle
-    if not isinstance(vehicle, Vehicle):
-        raise ConfigError("--sensors: the full car reads its four corner accelerometers; an IMU is the half "
-                          "car's so far")
     if preset == "axles":
         return vehicle.with_sensors(None)
     x = vehicle.cog_from_front_axle_m + IMU_BEHIND_COG_M
-    return vehicle.with_sensors(SensorSet((Sensor("imu", "/imu/data", x, 0.0, ("accel_z", "gyro_y")),)))
+    if isinstance(vehicle, Vehicle):
+        return vehicle.with_sensors(SensorSet((Sensor("imu", "/imu/data", x, 0.0, ("accel_z", "gyro_y")),)))
+    y = vehicle.cog_lateral_m + IMU_LEFT_OF_COG_M
+    imu = Sensor("imu", "/imu/data", x, y, ("accel_z", "gyro_x", "gyro_y"))
+    return vehicle.with_sensors(SensorSet((imu,)))
 
 
 def add_departure_options(p: argparse.ArgumentParser) -> None:

@@ -78,7 +78,7 @@ from rozyn_estimator.method.likelihood.newton import aground
 from rozyn_estimator.method.likelihood.road_input import steady_window, unsteady
 from rozyn_estimator.method.likelihood.score import SandwichRatio
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, taper_window, window_spectra
-from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
+from rozyn_estimator.vehicle_full import FullVehicle
 
 _MIN_NOISE = 1e-9  # the model's fixed white floor, share of each channel's band power
 _FIRST_ITERATIONS = 25  # the first start's share of max_iter when a second may follow (noisy data: 3-15)
@@ -267,8 +267,8 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     share = _noise_share(theta, model, power)
     worst = int(np.argmax(share))
     if share[worst] > cfg.max_noise_share:
-        raise _FitError(f"likelihood fit explains the {CORNERS[sensors[worst]]} channel as mostly noise "
-                        f"({share[worst]:.0%} of its power in the band): a wrong basin or a faulty sensor")
+        raise _FitError(f"likelihood fit explains the {vehicle.channel_names[sensors[worst]]} channel as "
+                        f"mostly noise ({share[worst]:.0%} of its band power): a wrong basin or a bad sensor")
     params = model.physical(theta)
     if not 1e-3 * vehicle.wheelbase_m < params[3] < (1 - 1e-3) * vehicle.wheelbase_m:
         raise _FitError(f"likelihood fit: CoG at the wheelbase's end (lf = {params[3]:.4g} m)")

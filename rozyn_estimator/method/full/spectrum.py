@@ -34,6 +34,7 @@ import numpy as np
 from numpy.polynomial import legendre
 from scipy import sparse, special
 
+from rozyn_estimator.body_model import full_car_channel_rows
 from rozyn_estimator.gravity import gravity_height_m, rotation_inertia_kgm2, rotation_stiffness_nmprad
 from rozyn_estimator.method.full.fit import corner_matrices, corner_response_derivatives
 from rozyn_estimator.method.full.grid import ALIAS_SPACING_HZ, alias_map, apply, evaluation_map
@@ -99,7 +100,7 @@ class FullCarSpectrum:
             calibrate=tuple(calibrate), sensor_values=sensor_values, sample_weights=sample_weights)
         self.sensors = tuple(sensors)
         self.k = len(self.sensors)
-        self.rear = np.array([c in (2, 3) for c in self.sensors], dtype=float)
+        self.rear = np.array([vehicle.channel_late[c] for c in self.sensors], dtype=float)
         self.calibrate = tuple(g for g in sensor_model.GROUPS if g in calibrate)
         self.sensor_values = None if sensor_values is None else \
             sensor_model.unpack(np.asarray(sensor_values, dtype=float), sensor_model.GROUPS, self.k)
@@ -208,14 +209,13 @@ class FullCarSpectrum:
             self.__dict__.update(saved)
 
     def sensing_of(self, v: FullVehicle, channel_factor: np.ndarray | None = None) -> np.ndarray:
-        """iω P (F, k, 3): the sensors' accelerations from the body's velocities (q̇), each
-        channel times its ``channel_factor`` (k,) or (F, k)."""
+        """iω P (F, k, 3): the sensors' accelerations from the body's velocities (q̇) (a gyro's
+        rate: P), each channel times its ``channel_factor`` (k,) or (F, k)."""
         w = self.omega
-        xs, ys = np.asarray(v.sensor_x_m)[list(self.sensors)], np.asarray(v.sensor_y_m)[list(self.sensors)]
-        P = np.column_stack([np.ones(self.k), -xs, ys])
+        P, rate = full_car_channel_rows(v, self.sensors)  # a gyro reads q̇ itself, not iω q̇
         factor = np.ones((w.size, self.k)) if channel_factor is None else \
             np.broadcast_to(channel_factor, (w.size, self.k))
-        out = 1j * w[:, None, None] * factor[:, :, None] * P[None]
+        out = np.where(rate[None, :, None], 1.0, 1j * w[:, None, None]) * factor[:, :, None] * P[None]
         if self.sensor_values is None:
             return out
         return sensor_model.calibrated(out, w, self.rear, self.sensor_values)

@@ -34,6 +34,7 @@ from rozyn_estimator.method.config import PipelineConfig
 from rozyn_estimator.method.correlation import correlation_sums
 from rozyn_estimator.method.drive import constant_speed_only, varying_drive, window_speed
 from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES, fit_full_inertia
+from rozyn_estimator.method.full.imu import gyro_sign_problem, stage_input
 from rozyn_estimator.method.full.refine import FullRefinement, refine_full
 from rozyn_estimator.method.full.uncertainty.budget import FullBudget, full_contributions
 from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
@@ -99,7 +100,7 @@ def estimate_full(
     vehicle: FullVehicle,
     config: PipelineConfig | None = None,
     speed_mps: float | np.ndarray | None = None,
-    sensors: Sequence[str] = CORNERS,
+    sensors: Sequence[str] | None = None,
     warm: FullEstimate | None = None,
 ) -> FullEstimate:
     """Rozyn's stage of the full car on one window.
@@ -114,23 +115,26 @@ def estimate_full(
         speed_mps: the vehicle's speed [m/s] when known, a number or one per sample: the
             correlation lags shorter than the wheelbase delay are skipped (the rear wheels
             repeat the front ones' road); the refinement needs it.
-        sensors: the corner (``front_left`` …) of each column's accelerometer.
+        sensors: the channel of each column: the corner (``front_left`` …) of its
+            accelerometer, or a sensors block's channels (all, in order; None: the vehicle's).
         warm: the previous window's estimate (the refinement's warm start; unused by
             Rozyn's stage).
     """
     cfg = config or PipelineConfig()
+    sensors = vehicle.channel_names if sensors is None else sensors
     if cfg.refine == "likelihood":
         return _refined(accel_mps2, fs_hz, vehicle, cfg, speed_mps, sensors, warm)
     started = time.perf_counter()
     accel = np.asarray(accel_mps2)
     try:
-        index = _sensor_indices(sensors)
+        index = _sensor_indices(sensors, vehicle)
         y, gated = checked_window(accel, fs_hz, cfg, tuple(sensors))
     except InputError as exc:
         return FullEstimate(status="failed", reason=str(exc), sensors=tuple(sensors),
                             n_samples=int(accel.shape[0]) if accel.ndim else 0,
                             elapsed_ms=(time.perf_counter() - started) * 1e3)
-    if why := constant_speed_only(speed_mps):
+    if why := constant_speed_only(speed_mps) or \
+            gyro_sign_problem(y, fs_hz, vehicle, window_speed(speed_mps)[0]):
         return FullEstimate(status="failed", reason=why, sensors=tuple(sensors), n_samples=int(y.shape[0]),
                             elapsed_ms=(time.perf_counter() - started) * 1e3)
     return dataclasses.replace(_rozyn_stage(y, fs_hz, vehicle, cfg, speed_mps, sensors, index, started),
@@ -142,6 +146,7 @@ def _rozyn_stage(y: np.ndarray, fs_hz: float, vehicle: FullVehicle, cfg: Pipelin
                  started: float) -> FullEstimate:
     """Rozyn's stage on the checked, demeaned window ``y`` (:func:`checked_window`)."""
     n = int(y.shape[0])
+    y, vehicle, index = stage_input(y, fs_hz, vehicle, index)  # a sensors block's: the corners'
     try:
         params, cov, modes, notes = _identify(y, fs_hz, vehicle, cfg, window_speed(speed_mps)[0], index)
     except (InputError, IdentificationError, np.linalg.LinAlgError) as exc:
@@ -164,11 +169,14 @@ def _refined(
     full stage with a note when the refinement fails."""
     started = time.perf_counter()
     try:
-        index = _sensor_indices(sensors)
+        index = _sensor_indices(sensors, vehicle)
         y, gated = checked_window(np.asarray(accel_mps2), fs_hz, cfg, tuple(sensors))
     except InputError as exc:  # bad input: neither stage can use it
         return FullEstimate(status="failed", reason=str(exc), sensors=tuple(sensors),
                             n_samples=int(np.shape(accel_mps2)[0]) if np.ndim(accel_mps2) else 0,
+                            elapsed_ms=(time.perf_counter() - started) * 1e3)
+    if why := gyro_sign_problem(y, fs_hz, vehicle, window_speed(speed_mps)[0]):
+        return FullEstimate(status="failed", reason=why, sensors=tuple(sensors), n_samples=int(y.shape[0]),
                             elapsed_ms=(time.perf_counter() - started) * 1e3)
     warm_ref = warm.refinement if warm is not None else None
 
@@ -215,7 +223,12 @@ def _refine_window(y: np.ndarray, gated: tuple[int, ...], fs_hz: float, vehicle:
 
 
 
-def _sensor_indices(sensors: Sequence[str]) -> tuple[int, ...]:
+def _sensor_indices(sensors: Sequence[str], vehicle: FullVehicle) -> tuple[int, ...]:
+    if vehicle.sensors is not None:  # a block's channels, all of them in order
+        if tuple(sensors) != vehicle.channel_names:
+            names, got = ", ".join(vehicle.channel_names), ", ".join(sensors) or "none"
+            raise InputError(f"full car: the sensors block's channels are {names}; got {got}")
+        return tuple(range(len(sensors)))
     unknown = [s for s in sensors if s not in CORNERS]
     if unknown or len(set(sensors)) != len(sensors) or len(sensors) not in (3, 4):
         raise InputError(f"full car: sensors must be 3 or 4 distinct corners of {', '.join(CORNERS)}; "

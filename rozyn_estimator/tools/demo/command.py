@@ -183,7 +183,7 @@ def _vehicle_values(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str,
     from ``--vehicle`` and ``--model``; ConfigError when they disagree."""
     from rozyn_estimator.parameters import flatten
     from rozyn_estimator.vehicle import Vehicle, dump_vehicle
-    from rozyn_estimator.vehicle_full import FullVehicle, load_any_vehicle
+    from rozyn_estimator.vehicle_full import FullVehicle, dump_full_vehicle, load_any_vehicle
 
     vehicle: Vehicle | FullVehicle = FullVehicle() if args.model == "full" else Vehicle()
     if args.vehicle:
@@ -194,12 +194,12 @@ def _vehicle_values(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str,
             raise ConfigError(f"--vehicle {args.vehicle} is a {model} car's vehicle file; --model "
                               f"{args.model} needs one that {needs}")
     vehicle = with_sensor_preset(vehicle, args.sensors)
-    if isinstance(vehicle, Vehicle) and vehicle.sensors is not None:  # a block is no flat parameter: a file
+    if vehicle.sensors is not None:  # a block is no flat parameter: a file
         if any(error != 0.0 for error in vehicle_error_values(args).values()):
             raise ConfigError("the --*-error options change vehicle.* values; a vehicle with a sensors block "
                               "is given to the nodes as its file, as it is")
         path = Path(tempfile.mkdtemp(prefix="rozyn-demo-")) / "vehicle.yaml"
-        path.write_text(dump_vehicle(vehicle))
+        path.write_text(dump_vehicle(vehicle) if isinstance(vehicle, Vehicle) else dump_full_vehicle(vehicle))
         return {"vehicle_file": str(path)}, {"vehicle_file": str(path)}
     values = {f.name: f.value for f in flatten(vehicle)}
     if isinstance(vehicle, FullVehicle):
@@ -349,7 +349,7 @@ def _rozyn_command() -> str:
 
 def _sensors_label(config: Any) -> str:
     """``; sensors: imu (/imu/data, x 1.50 m): accel_z, gyro_y`` for a sensors block, else nothing."""
-    block = config.vehicle.sensors if config.model == "half" else None
+    block = config.plant_vehicle.sensors
     return f"; sensors: {block.describe()}" if block is not None else ""
 
 

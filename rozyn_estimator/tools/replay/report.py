@@ -30,7 +30,7 @@ def format_summary(result: ReplayResult) -> str:
         The report, lines joined by newlines.
     """
     cfg = result.config
-    block = cfg.vehicle.sensors if cfg.full_vehicle is None else None
+    block = cfg.model_vehicle.sensors
     sources = f"{block.describe()}" if block is not None else \
         f"{', '.join(absolute_topic(t) for _, t in cfg.sensors)}, {cfg.field}"
     lines = [

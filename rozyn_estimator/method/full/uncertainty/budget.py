@@ -21,7 +21,7 @@ from rozyn_estimator.method.budget import GROUPS, Budget
 from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES, fit_full_inertia
 from rozyn_estimator.method.identification import IdentificationError, Mode
 from rozyn_estimator.tolerances import HEIGHT_KEYS
-from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
+from rozyn_estimator.vehicle_full import FullVehicle
 
 _REL_STEP = 1e-5  # share of a value
 ABS_STEP = 1e-6  # m, s or share of a gain
@@ -100,7 +100,8 @@ def vehicle_moves(v: FullVehicle, key: str,
     if key in ("wheelbase_m", "track_front_m", "track_rear_m", *HEIGHT_KEYS):
         return [(key, ABS_STEP, lambda h: moved_copy(v, **{key: getattr(v, key) + h}))]
     if key == "sensor_lateral_m":
-        return [(f"{key}[{CORNERS[c]}]", ABS_STEP, lateral(c)) for c in sensors]
+        return [(f"{key}[{v.channel_names[c]}]", ABS_STEP, lateral(c)) for c in sensors
+                if v.channel_kinds[c] == "accel_z"]  # a gyro reads the same rotation anywhere
     return None
 
 

@@ -40,7 +40,7 @@ from rozyn_estimator.method.full.uncertainty.corners import CornerCalibrating
 from rozyn_estimator.method.full.whittle import FullWhittle, ridged, scoring
 from rozyn_estimator.method.likelihood.uncertainty.augment import backtracked
 from rozyn_estimator.method.likelihood.uncertainty.calibration import Calibration
-from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
+from rozyn_estimator.vehicle_full import FullVehicle
 
 _FAR = 3.0  # a step longer than this many posterior std: beyond the linear range
 # a cold fit's Newton decrement at which it may hand over to the calibration: every combination
@@ -107,9 +107,11 @@ class VehicleCalibration:
 
 
 def sensor_groups(vehicle: FullVehicle, sensors: tuple[int, ...]) -> tuple[str, ...]:
-    """The groups the vehicle's tolerances call for (the delay with front and rear sensors only)."""
+    """The groups the vehicle's tolerances call for (the delay with channels on both clocks only:
+    :attr:`~rozyn_estimator.vehicle_full.FullVehicle.channel_late`)."""
     tol = vehicle.tolerances.to_dict()
-    both_axles = any(c < 2 for c in sensors) and any(c >= 2 for c in sensors)
+    late = [vehicle.channel_late[c] for c in sensors]
+    both_axles = any(late) and not all(late)
     return tuple(g for g in sensing.GROUPS if any(tol[key] > 0 for key in TOLERANCE_KEYS[g])
                  and (g != "delay" or both_axles))
 
@@ -136,6 +138,8 @@ def calibrate_vehicle(
     n, k = base.n_params, base.k
     names = model.names[model.calibration_slice]
     stds = _prior_stds(vehicle, base.sensors, names)
+    labels = tuple(vehicle.channel_names[c] for c in base.sensors)
+    gyros = [vehicle.channel_kinds[c] != "accel_z" for c in base.sensors]
     precision = np.r_[np.zeros(n), 1.0 / stds**2]
     posterior = FullWhittle(model, objective.periodogram, objective.counts, precision)  # type: ignore[arg-type]
     every = np.zeros(len(sensing.parameter_names(sensing.GROUPS, k))) if start is None else start.values
@@ -169,10 +173,11 @@ def calibrate_vehicle(
                         _CONVERGED, max_iter)
         point, converged = found.x, bool(found.get("success")) or posterior.decrement(found.x) < _CONVERGED
         info = posterior.information(point)
-    contributions, posterior_std = _contributions(info, model, point, precision[n:], base.sensors)
+    contributions, posterior_std = _contributions(info, model, point, precision[n:], base.sensors, labels)
     fitted = point[n:]
-    calibrations = tuple(Calibration(*_reported(name, base.sensors, float(x), float(sd), float(tol)))
-                         for name, x, sd, tol in zip(names, fitted, posterior_std, stds, strict=True))
+    calibrations = tuple(Calibration(*_reported(name, labels, float(x), float(sd), float(tol)))
+                         for name, x, sd, tol in zip(names, fitted, posterior_std, stds, strict=True)
+                         if not _gyro_position(name, gyros))
     n_sensor = fitted.size - len(corner_keys)
     calibration = VehicleCalibration(groups, _every(fitted[:n_sensor], groups, k), calibrations,
                                      contributions, point[:5].copy(), converged, corner_keys=corner_keys,
@@ -191,7 +196,7 @@ def _shares_valid(model: FullCarSpectrum | CornerCalibrating, point: np.ndarray)
 
 def _contributions(
     info: np.ndarray, model: FullCarSpectrum | CornerCalibrating, point: np.ndarray, precision: np.ndarray,
-    sensors: tuple[int, ...],
+    sensors: tuple[int, ...], labels: tuple[str, ...],
 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """(each calibrated value's contribution (5,) to the estimate, the values' posterior std)
     from the data's information ``info`` of the augmented ``model``: the module docstring's
@@ -204,7 +209,7 @@ def _contributions(
     root = (vec * np.sqrt(np.clip(lam, 0.0, None))) @ vec.T
     per_value = model.physical_jacobian(point)[:, :n] @ A @ root
     names = model.names[model.calibration_slice]
-    return ({_budget_name(name, sensors): per_value[:, j] for j, name in enumerate(names)},
+    return ({_budget_name(name, sensors, labels): per_value[:, j] for j, name in enumerate(names)},
             np.sqrt(np.clip(np.diag(M), 0.0, None)))
 
 
@@ -225,18 +230,26 @@ def _tolerance_key(name: str, sensors: tuple[int, ...]) -> tuple[str, int | None
 def _prior_stds(vehicle: FullVehicle, sensors: tuple[int, ...], names: list[str]) -> np.ndarray:
     """Each calibrated value's tolerance in θ's units (a log gain: the share; m; ms)."""
     tol = vehicle.tolerances.to_dict()
-    out = [tol[key] / (sensing.DELAY_SCALE_S if name == "delay_ms" else 1.0)
+    gyros = [vehicle.channel_kinds[c] != "accel_z" for c in sensors]
+    out = [0.0 if _gyro_position(name, gyros) else
+           tol[key] / (sensing.DELAY_SCALE_S if name == "delay_ms" else 1.0)
            for name, (key, _) in ((name, _tolerance_key(name, sensors)) for name in names)]
     return np.maximum(np.array(out), _FIXED)
 
 
-def _budget_name(name: str, sensors: tuple[int, ...]) -> str:
+def _gyro_position(name: str, gyros: list[bool]) -> bool:
+    """The calibrated value is a gyro's position (which it does not read: held at the file's)."""
+    kind, _, index = name.rpartition("_")
+    return kind in ("sensor_dx", "sensor_dy") and gyros[int(index)]
+
+
+def _budget_name(name: str, sensors: tuple[int, ...], labels: tuple[str, ...]) -> str:
     """The budget's name of a calibrated value (as :mod:`.refine_budget` names its moves)."""
     key, corner = _tolerance_key(name, sensors)
-    return key if corner is None else f"{key}[{CORNERS[corner]}]"
+    return key if corner is None else f"{key}[{labels[int(name.rsplit('_', 1)[1])]}]"
 
 
-def _reported(name: str, sensors: tuple[int, ...], value: float, std: float,
+def _reported(name: str, labels: tuple[str, ...], value: float, std: float,
               tol: float) -> tuple[str, float, float, float]:
     """(name, estimate, std, tolerance) as :class:`Calibration` reports them (SI; the name's
     unit suffix picks the display: a gain in %, a position in mm, the delay in ms; a corner
@@ -247,7 +260,7 @@ def _reported(name: str, sensors: tuple[int, ...], value: float, std: float,
         s = sensing.DELAY_SCALE_S
         return "sensor_time_offset_s", value * s, std * s, tol * s
     kind, index = name.rsplit("_", 1)
-    corner = CORNERS[sensors[int(index)]]
+    corner = labels[int(index)]
     label = {"ln_gain": f"sensor_gain_{corner}", "sensor_dx": f"sensor_x_{corner}_m",
              "sensor_dy": f"sensor_y_{corner}_m"}[kind]
     return label, (math.expm1(value) if kind == "ln_gain" else value), std, tol

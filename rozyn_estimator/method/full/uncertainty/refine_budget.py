@@ -43,7 +43,7 @@ from rozyn_estimator.method.full.uncertainty.budget import (
 from rozyn_estimator.method.full.uncertainty.corners import values_of
 from rozyn_estimator.method.full.uncertainty.geometry import GEOMETRY, geometry_derivatives
 from rozyn_estimator.method.full.whittle import FullWhittle
-from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
+from rozyn_estimator.vehicle_full import FullVehicle
 
 _SENSOR_FIELDS = ("sensor_x_m", "sensor_y_m")
 # a move: the step -> (the vehicle moved, a factor per channel (F, k) or None)
@@ -139,12 +139,13 @@ def _moves(v: FullVehicle, model: FullCarSpectrum, key: str) -> list[tuple[str, 
         return [(name, step, unsensed(move)) for name, step, move in alike]
     axle = AXLE["front" if "_front" in key else "rear"]
     if key in ("sensor_front_offset_m", "sensor_rear_offset_m"):
-        return [(f"{key}[{CORNERS[c]}]", ABS_STEP, shifted(c)) for c in sensors if c in axle]
+        return [(f"{key}[{v.channel_names[c]}]", ABS_STEP, shifted(c)) for c in sensors
+                if c in axle and v.channel_kinds[c] == "accel_z"]  # a gyro reads the same anywhere
     if key.startswith("sensor_gain"):
-        return [(f"{key}[{CORNERS[c]}]", ABS_STEP,
+        return [(f"{key}[{v.channel_names[c]}]", ABS_STEP,
                  channel([j], lambda h: np.full(model.omega.size, 1.0 + h, dtype=complex)))
                 for j, c in enumerate(sensors) if c in axle]
     if key == "sensor_time_offset_s":
-        rear = [j for j, c in enumerate(sensors) if c in AXLE["rear"]]
-        return [(key, ABS_STEP, channel(rear, lambda h: np.exp(-1j * model.omega * h)))]
+        rear = [j for j, c in enumerate(sensors) if v.channel_late[c]]
+        return [(key, ABS_STEP, channel(rear, lambda h: np.exp(-1j * model.omega * h)))] if rear else []
     return []
