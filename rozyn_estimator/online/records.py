@@ -18,6 +18,7 @@ import numpy as np
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PARAM_NAMES, Estimate
 from rozyn_estimator.method.full import FULL_PARAM_NAMES, FullEstimate
+from rozyn_estimator.method.information import describe
 from rozyn_estimator.sensors import unit_suffix
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
@@ -202,16 +203,18 @@ def update_values(update: Update, layout: Layout = HALF_LAYOUT) -> dict[str, str
             out[f"{name}_budget"] = budget.text(i)
         for c in budget.calibration:
             out[f"calibrated {c.name}"] = c.text()
-    out |= _refinement_values(getattr(est, "refinement", None), layout.channels)
+    out |= _refinement_values(getattr(est, "refinement", None), layout)
     for i, mode in enumerate(est.modes):
         out[f"mode{i + 1}_freq_hz"] = f"{mode.freq_hz:.4f}"
         out[f"mode{i + 1}_damping"] = f"{mode.damping_ratio:.4f}"
     return out
 
 
-def _refinement_values(ref: Any, channels: Sequence[str]) -> dict[str, str]:
-    """The refinement's model-fit check, fitted waviness, sensor noise and iterations (the
-    half car's refinement has them all; the full car's what it has)."""
+def _refinement_values(ref: Any, layout: Layout) -> dict[str, str]:
+    """The refinement's model-fit check, fitted waviness, sensor noise, each channel's share of
+    the information (:mod:`rozyn_estimator.method.information`) and iterations (the half car's
+    refinement has them all; the full car's what it has)."""
+    channels = layout.channels
     out = {}
     fit = getattr(ref, "model_fit", None)
     if fit is not None:
@@ -221,5 +224,7 @@ def _refinement_values(ref: Any, channels: Sequence[str]) -> dict[str, str]:
         out["road_waviness"] = f"{ref.waviness:.3f}"
         for c, noise in zip(channels, ref.noise_std_mps2, strict=False):
             out[f"noise_std_{c}_{unit_suffix(c)}"] = f"{noise:.4g}"  # a gyro's in rad/s
+        for c, lost in zip(channels, getattr(ref, "information_lost", ()), strict=False):
+            out[f"information_lost_without_{c}"] = describe(lost, layout.params)
         out["refine_iterations"] = str(ref.iterations)
     return out

@@ -50,7 +50,6 @@ import dataclasses
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import OptimizeResult
@@ -58,6 +57,7 @@ from scipy.optimize import OptimizeResult
 from rozyn_estimator.method.full.fitcheck import full_model_fit
 from rozyn_estimator.method.full.intermittency import variance_factors
 from rozyn_estimator.method.full.means import GROUP_HZ, coarse_fit, grouped, kernel_m2
+from rozyn_estimator.method.full.result import FullRefinement
 from rozyn_estimator.method.full.score import sandwich_ratio
 from rozyn_estimator.method.full.spectrum import BODY_NAMES, FullCarSpectrum
 from rozyn_estimator.method.full.speed import check_full_speed, speed_models
@@ -71,9 +71,10 @@ from rozyn_estimator.method.full.uncertainty.calibrate import (
 from rozyn_estimator.method.full.uncertainty.corners import corner_keys
 from rozyn_estimator.method.full.uncertainty.refine_budget import refinement_contributions
 from rozyn_estimator.method.full.whittle import FullWhittle, ridged, scoring
+from rozyn_estimator.method.information import information_lost
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.covariance import NOISE_AT_ZERO
-from rozyn_estimator.method.likelihood.fitcheck import ModelFit, neighbour_correlation, unsteady_fit
+from rozyn_estimator.method.likelihood.fitcheck import neighbour_correlation, unsteady_fit
 from rozyn_estimator.method.likelihood.newton import aground
 from rozyn_estimator.method.likelihood.road_input import steady_window, unsteady
 from rozyn_estimator.method.likelihood.score import SandwichRatio
@@ -85,50 +86,6 @@ _FIRST_ITERATIONS = 25  # the first start's share of max_iter when a second may 
 _CLOSE = 0.25  # a result further than this share from its start calls for the grid's start too
 _BUDGET_MOVE = 0.01  # a warm update keeps the budget while ln m, ln I, logit l_f, y_c [m] move less
 _GRID_HZ = {"heave": (0.8, 1.2, 1.8), "pitch": (0.8, 1.2, 1.8), "roll": (1.0, 1.6, 2.5)}
-
-
-@dataclass(frozen=True)
-class FullRefinement:
-    """Result of the full car's likelihood refinement. ``params``/``covariance`` None unless ok."""
-
-    status: str  # "ok" | "failed"
-    reason: str = ""
-    params: np.ndarray | None = None  # (5,) in FULL_PARAM_NAMES order
-    covariance: np.ndarray | None = None  # (5, 5) the statistical part (the sandwich, the road's factors)
-    theta: np.ndarray | None = None  # all fitted parameters (names in ``names``)
-    names: tuple[str, ...] = ()
-    neg_log_likelihood: float = math.nan  # ℓ at the optimum (constant terms dropped)
-    iterations: int = 0
-    starts: int = 0
-    band_hz: tuple[float, float] = (math.nan, math.nan)
-    noise_std_mps2: tuple[float, ...] = ()  # fitted white sensor noise per channel
-    waviness: float = 2.0
-    coherence_scale: float = 1.0  # the tracks' fitted separation over the front track
-    contributions: dict[str, np.ndarray] = field(default_factory=dict)  # assumed value -> (5,) per 1 u
-    budget_theta: np.ndarray | None = None  # the body parameters θ[:5] the contributions were taken at
-    variance_factors: tuple[float, ...] = ()  # the non-stationary road's factors on the model's variances
-    sandwich: SandwichRatio | None = None  # the taper's sandwich over the model's std (.score), where taken
-    calibration: VehicleCalibration | None = None  # the sensors and corners as the data calibrated them
-    model_fit: ModelFit | None = None  # the goodness-of-fit check (.fitcheck)
-    elapsed_ms: float = 0.0
-    notes: tuple[str, ...] = ()
-
-    @property
-    def ok(self) -> bool:
-        return self.status == "ok"
-
-    def to_dict(self) -> dict[str, object]:
-        return {"status": self.status, "reason": self.reason,
-                "params": None if self.params is None else self.params.tolist(),
-                "neg_log_likelihood": self.neg_log_likelihood, "iterations": self.iterations,
-                "starts": self.starts, "band_hz": list(self.band_hz),
-                "noise_std_mps2": list(self.noise_std_mps2),
-                "waviness": self.waviness, "coherence_scale": self.coherence_scale,
-                "variance_factors": list(self.variance_factors),
-                "calibration": [] if self.calibration is None else
-                [c.to_dict() for c in self.calibration.calibrations],
-                "model_fit": None if self.model_fit is None else self.model_fit.to_dict(),
-                "elapsed_ms": self.elapsed_ms, "notes": list(self.notes)}
 
 
 class _FitError(Exception):
@@ -307,14 +264,15 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     if objective.decrement(theta) >= (cfg.tol if calibration is None else cfg.tol_calibrated) or \
             (calibration is not None and not calibration.converged):
         notes.append(f"likelihood fit: not converged in {cfg.max_iter} iterations")
-    k = model.index
+    k, lost = model.index, information_lost(*objective.sampled_model(theta), jac)
     return FullRefinement(
         status="ok", params=params, covariance=0.5 * (cov + cov.T), theta=theta, names=tuple(model.names),
         neg_log_likelihood=float(best.fun), iterations=iterations, starts=starts, band_hz=band,
         noise_std_mps2=tuple(np.sqrt(np.exp(theta[model.noise_slice]) * fs).tolist()),
         waviness=float(theta[k["waviness"]]), coherence_scale=float(np.exp(theta[k["ln_coherence_scale"]])),
         contributions=contributions, budget_theta=budget_theta, variance_factors=tuple(factors.tolist()),
-        sandwich=sandwich, calibration=calibration, notes=tuple(notes), model_fit=fit)
+        sandwich=sandwich, calibration=calibration, notes=tuple(notes), model_fit=fit,
+        information_lost=tuple(tuple(float(x) for x in row) for row in lost))
 
 
 def _contributions(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndarray, vehicle: FullVehicle,

@@ -228,6 +228,15 @@ class FullWhittle:
             self._sampled_rows = self.sampled(dS_nodes, linv)
         return self._sampled_rows
 
+    def sampled_model(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(S, dS/dθ, what each frequency counts for) over :meth:`sampled_rows`' frequencies."""
+        S, _ = self.factored(theta)
+        assert self._state is not None
+        if self._sub.size == self.counts.size:
+            return S, self.model.to_targets(self._state[1]), np.ravel(self.counts)
+        at = self._sub
+        return S[at], self.model.to_targets(self._state[1], at), np.ravel(self._sub_root_counts) ** 2
+
     def sampled(self, changes: np.ndarray, linv: np.ndarray) -> np.ndarray:
         """:meth:`whitened` rows of ``changes`` (p, nodes, k, k) of S at the model's nodes, over
         the frequencies of :meth:`sampled_rows` (``linv`` at every frequency)."""

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rozyn_estimator.method.information import information_lost
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.covariance import NOISE_AT_ZERO, CovarianceError, kept
 from rozyn_estimator.method.likelihood.fitcheck import ModelFit, model_fit, unsteady_fit
@@ -90,6 +91,7 @@ class Refinement:
     contributions: dict[str, np.ndarray] = field(default_factory=dict)  # assumed value -> (3,) per 1 u
     sensitivities: Sensitivities | None = None  # of the values left assumed, where they were taken
     sandwich: SandwichRatio | None = None  # the model sandwich's ratio, where it was taken
+    information_lost: tuple[tuple[float, ...], ...] = ()  # per channel, per parameter (method.information)
     elapsed_ms: float = 0.0
     notes: tuple[str, ...] = field(default=())
 
@@ -104,7 +106,7 @@ class Refinement:
             "neg_log_likelihood": self.neg_log_likelihood, "iterations": self.iterations,
             "starts": self.starts, "band_hz": list(self.band_hz),
             "noise_std_mps2": list(self.noise_std_mps2), "waviness": self.waviness,
-            "elapsed_ms": self.elapsed_ms,
+            "information_lost": [list(s) for s in self.information_lost], "elapsed_ms": self.elapsed_ms,
         }
         if self.suspension_scale:
             out["suspension_scale"] = list(self.suspension_scale)
@@ -279,8 +281,16 @@ def _refine(
         else (),
         variance_factors=tuple(found.factors.tolist()), notes=tuple(notes), calibration=found.calibration,
         contributions=found.contributions, model_fit=fit, sensitivities=found.sensitivities,
-        sandwich=found.sandwich,
+        sandwich=found.sandwich, information_lost=_information_lost(found.objective, found.theta),
     )
+
+
+def _information_lost(objective: WhittleObjective, theta: np.ndarray) -> tuple[tuple[float, ...], ...]:
+    """Each channel's share of each parameter's information (:mod:`rozyn_estimator.method.information`),
+    over every sixth bin (it is smooth in frequency: a sixth of the work)."""
+    S, dS = objective.model_at(theta)
+    lost = information_lost(S[2::6], dS[:, 2::6], None, objective.model.physical_jacobian(theta))
+    return tuple(tuple(float(x) for x in row) for row in lost)
 
 
 def _speed_notes(model: HalfCarSpectrum, spectra: Spectra, cfg: LikelihoodConfig, theta: np.ndarray,

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from rozyn_estimator.bag import absolute_topic
+from rozyn_estimator.method.information import describe
 from rozyn_estimator.online import LEVEL_NAMES, NS
 from rozyn_estimator.tools.replay.outputs import (
     PUBLISHED_TOPIC,
@@ -63,6 +64,7 @@ def format_summary(result: ReplayResult) -> str:
             )
             lines.append(f"{'last vs truth':<22}" + "".join(_error(x, t, name) for x, t, name in zip(
                 p[-1], result.truth, _columns(p.shape[1]), strict=True)))
+    lines += _channel_shares(result)
     if result.recorded:
         lines.append(_against_recorded(result))
     if result.out_dir is not None:
@@ -75,6 +77,21 @@ def format_summary(result: ReplayResult) -> str:
     if result.plot is not None:
         lines.append(f"plot: {result.plot}")
     return "\n".join(lines)
+
+
+def _channel_shares(result: ReplayResult) -> list[str]:
+    """What each channel carries in the last published refined estimate: the share of each
+    parameter's information lost without it (:mod:`rozyn_estimator.method.information`)."""
+    for ru in reversed(result.updates):
+        est = published_estimate(ru.update)
+        lost = getattr(getattr(est, "refinement", None), "information_lost", ())
+        if est is not None and lost:
+            layout = result.config.layout
+            width = max(len(c) for c in layout.channels)
+            return ["", "information lost without each channel (the last estimate):"] + [
+                f"  {c:<{width}}  {describe(row, layout.params)}" for c, row in zip(layout.channels, lost,
+                                                                                  strict=False)]
+    return []
 
 
 def _published_params(result: ReplayResult) -> list[tuple[int, np.ndarray]]:
