@@ -11,7 +11,8 @@ the sensor gains a share, and for the time offset (rear sensor minus front) seco
 The defaults describe a vehicle known from its data sheet (README, "What the covariance
 means", justifies each). In a vehicle file, a ``tolerances`` mapping lists the ones that
 apply: keys it leaves out are exactly known (``tolerances: {}`` is today's estimator);
-without the mapping the defaults apply.
+without the mapping the defaults apply. :class:`FullTolerances` adds the full car's (tracks,
+anti-roll bars, lateral positions, an IMU's gyros' turn about z, in radians).
 """
 
 from __future__ import annotations
@@ -102,6 +103,31 @@ class Tolerances:
     def any(self) -> bool:
         """True when some assumed value carries a tolerance."""
         return any(v > 0 for v in self.to_dict().values())
+
+
+@dataclass(frozen=True)
+class FullTolerances(Tolerances):
+    """The half car's tolerances (an axle's share applies to both its corners; the sensor
+    offsets to the ``x`` of that axle's sensors) and the full car's own."""
+
+    track_front_m: float = param(0.005, "front track width", unit="m", low=0.0, high=1.0)
+    track_rear_m: float = param(0.005, "rear track width", unit="m", low=0.0, high=1.0)
+    anti_roll_stiffness_front_nmprad: float = param(0.10, "front anti-roll bar, share of its value", **_SHARE)
+    anti_roll_stiffness_rear_nmprad: float = param(0.10, "rear anti-roll bar, share of its value", **_SHARE)
+    sensor_lateral_m: float = param(0.01, "accelerometers' lateral positions", unit="m", low=0.0, high=1.0)
+    gyro_misalignment_rad: float = param(0.01, "an IMU's gyros' turn about z (a sensors block with gyros)",
+                                         unit="rad", low=0.0, high=0.5)
+
+    def applying(self, vehicle: Any) -> dict[str, float]:
+        """As the half car's, the gyros' turn only where the vehicle has gyros."""
+        out = super().applying(vehicle)
+        if all(kind == "accel_z" for kind in getattr(vehicle, "channel_kinds", ())):
+            out.pop("gyro_misalignment_rad", None)
+        return out
+
+    def half_car(self) -> Tolerances:
+        """The half car's part."""
+        return Tolerances(**{f.name: getattr(self, f.name) for f in dataclasses.fields(Tolerances)})
 
 
 KEYS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(Tolerances))

@@ -48,7 +48,7 @@ from rozyn_estimator.sensors import (
     sensors_from_mapping,
     sensors_from_parameters,
 )
-from rozyn_estimator.tolerances import Tolerances
+from rozyn_estimator.tolerances import FullTolerances
 from rozyn_estimator.vehicle import (
     HEIGHTS_RULE,
     MAX_VEHICLE_FILE_BYTES,
@@ -69,23 +69,6 @@ MODEL_PARAM = Param("vehicle model: half (front and rear accelerometers, the veh
 """The nodes' ``vehicle.model`` parameter (default ``half``)."""
 Quad = tuple[float, float, float, float]
 _POSITIVE: dict[str, Any] = {"low": 0.0, "open_low": True, "length": 4}
-_SHARE = {"low": 0.0, "high": 1.0}
-
-
-@dataclass(frozen=True)
-class FullTolerances(Tolerances):
-    """The half car's tolerances (an axle's share applies to both its corners; the sensor
-    offsets to the ``x`` of that axle's sensors) and the full car's own."""
-
-    track_front_m: float = param(0.005, "front track width", unit="m", low=0.0, high=1.0)
-    track_rear_m: float = param(0.005, "rear track width", unit="m", low=0.0, high=1.0)
-    anti_roll_stiffness_front_nmprad: float = param(0.10, "front anti-roll bar, share of its value", **_SHARE)
-    anti_roll_stiffness_rear_nmprad: float = param(0.10, "rear anti-roll bar, share of its value", **_SHARE)
-    sensor_lateral_m: float = param(0.01, "accelerometers' lateral positions", unit="m", low=0.0, high=1.0)
-
-    def half_car(self) -> Tolerances:
-        """The half car's part."""
-        return Tolerances(**{f.name: getattr(self, f.name) for f in fields(Tolerances)})
 
 
 @dataclass(frozen=True)

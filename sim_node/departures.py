@@ -81,6 +81,10 @@ class Departures:
     lowpass_hz: float = param(0.0, "cutoff of a 2nd-order Butterworth low-pass in both accelerometers, "
                               "run at the plant's internal rate; 0: none", unit="Hz", low=0.0,
                               high=10_000.0, read_only=True)
+    gyro_yaw_misalignment_rad: float = param(0.0, "model full, a sensors block: each IMU's gyros turned by "
+                                             "this angle about z: gyro_x reads cos a roll rate + sin a pitch "
+                                             "rate, gyro_y -sin a roll rate + cos a pitch rate (REP 103)",
+                                             unit="rad", low=-0.5, high=0.5, read_only=True)
 
     def __post_init__(self) -> None:
         check(self)

@@ -192,6 +192,26 @@ class SimBlock:
     channels: tuple[str, ...] = HALF_CHANNELS  # the columns of accel_mps2
 
 
+def gyro_mixing(vehicle: Vehicle | FullVehicle, yaw_rad: float) -> np.ndarray | None:
+    """(k, k) what each channel reads of the body's: the gyros of each sensor with both turned
+    ``yaw_rad`` about z (None: not turned). ConfigError where a turned sensor lacks one."""
+    if yaw_rad == 0.0:
+        return None
+    chans = vehicle.channels if isinstance(vehicle, FullVehicle) and vehicle.sensors is not None else ()
+    mix = np.eye(len(chans))
+    for sensor in {c.sensor for c in chans if c.kind != "accel_z"}:
+        kinds = {c.kind: i for i, c in enumerate(chans) if c.sensor == sensor}
+        if not {"gyro_x", "gyro_y"} <= set(kinds):
+            raise ConfigError(f"gyro_yaw_misalignment_rad: {sensor} needs both gyro_x and gyro_y to turn")
+        x, y = kinds["gyro_x"], kinds["gyro_y"]
+        c, s = math.cos(yaw_rad), math.sin(yaw_rad)
+        mix[x, x], mix[x, y], mix[y, x], mix[y, y] = c, s, -s, c
+    if not chans or np.array_equal(mix, np.eye(len(chans))):
+        raise ConfigError("gyro_yaw_misalignment_rad: only a full car's sensors block with gyro_x and gyro_y "
+                          "has gyros to turn")
+    return mix
+
+
 class Simulation:
     """A run of the half car (or the full car) over a road, produced block by block."""
 
@@ -223,6 +243,7 @@ class Simulation:
         self.sensors = Accelerometers(cfg.departures, 1.0 / self._dt, bias, cfg.include_gravity,
                                       full_car=isinstance(vehicle, FullVehicle), gyros=gyros)
         self._noise_std = np.where(gyros, cfg.gyro_noise_std_radps, cfg.noise_std_mps2)
+        self._mix = gyro_mixing(vehicle, cfg.departures.gyro_yaw_misalignment_rad)
         if self._step < 0:
             self._advance(-self._step)
 
@@ -350,7 +371,8 @@ class Simulation:
         if n < 0:
             raise ValueError(f"n must be >= 0, got {n}")
         t = self.time_s + np.arange(n) / cfg.rate_hz
-        accel = self.sensors.read(self._advance(n * cfg.oversample)[:: cfg.oversample])
+        body = self._advance(n * cfg.oversample)[:: cfg.oversample]
+        accel = self.sensors.read(body if self._mix is None else body @ self._mix.T)
         if np.any(self._noise_std > 0):
             accel = accel + self._noise_std * self._noise.standard_normal((n, len(cfg.channels)))
         return SimBlock(t_s=t, accel_mps2=accel, speed_mps=self.speed_at(t), channels=cfg.channels)

@@ -46,7 +46,7 @@ _ABS_STEP = 1e-6
 
 
 def group_of(key: str) -> str:
-    return next(label for prefix, label in GROUPS.items() if key.startswith(prefix))
+    return next((label for prefix, label in GROUPS.items() if key.startswith(prefix)), key)
 
 
 @dataclass(frozen=True)

@@ -117,6 +117,9 @@ def add_departure_options(p: argparse.ArgumentParser) -> None:
                         "(default: 0)")
     g.add_argument("--lowpass-hz", type=float, default=0.0, metavar="F",
                    help="a 2nd-order Butterworth low-pass at F Hz in both accelerometers (default: 0, none)")
+    g.add_argument("--gyro-yaw-misalignment-rad", type=float, default=0.0, metavar="A",
+                   help="--model full with an IMU: its gyros turned A rad about z, so gyro_x and gyro_y "
+                        "each read part of the other's rate (default: 0)")
 
 
 def departure_values(args: argparse.Namespace) -> dict[str, Any]:
@@ -126,6 +129,7 @@ def departure_values(args: argparse.Namespace) -> dict[str, Any]:
         "spring_reference_m": args.spring_reference_m, "gain_error_front": args.gain_error[0],
         "gain_error_rear": args.gain_error[1], "time_offset_s": args.time_offset_s,
         "lowpass_hz": args.lowpass_hz, "corner_gain_errors": tuple(args.corner_gain_errors),
+        "gyro_yaw_misalignment_rad": args.gyro_yaw_misalignment_rad,
     }
 
 

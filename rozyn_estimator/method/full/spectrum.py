@@ -78,7 +78,7 @@ class FullCarSpectrum:
         road_max_cpm: the road's profile ends at this spatial frequency [cycles/m]: the
             aliases hold the road below it only (:func:`spatial_band`); 0: no end.
         calibrate: the sensors' values θ also holds (:data:`.sensing.GROUPS`: ``gain``, ``x``,
-            ``y``, ``delay``; after the noise floors, as :func:`.sensing.parameter_names`).
+            ``y``, ``delay``, ``turn``; after the noise floors, as :func:`.sensing.parameter_names`).
         sensor_values: the sensors' departures from the vehicle's the model assumes (all of
             :func:`.sensing.parameter_names`' values for every group; None: none).
     """
@@ -98,9 +98,9 @@ class FullCarSpectrum:
             f_ref_hz=f_ref_hz, road_shape_terms=road_shape_terms, min_noise_psd=min_noise_psd,
             shape_edges_hz=edges_hz, kernel_m2_hz2=m2, grid_hz=grid_hz, road_max_cpm=road_max_cpm,
             calibrate=tuple(calibrate), sensor_values=sensor_values, sample_weights=sample_weights)
-        self.sensors = tuple(sensors)
-        self.k = len(self.sensors)
-        self.rear = np.array([vehicle.channel_late[c] for c in self.sensors], dtype=float)
+        self.sensors, self.k = tuple(sensors), len(sensors)
+        self.layout = sensor_model.channel_layout([vehicle.channel_late[c] for c in self.sensors],
+                                                  [vehicle.channel_kinds[c] for c in self.sensors])
         self.calibrate = tuple(g for g in sensor_model.GROUPS if g in calibrate)
         self.sensor_values = None if sensor_values is None else \
             sensor_model.unpack(np.asarray(sensor_values, dtype=float), sensor_model.GROUPS, self.k)
@@ -218,14 +218,14 @@ class FullCarSpectrum:
         out = np.where(rate[None, :, None], 1.0, 1j * w[:, None, None]) * factor[:, :, None] * P[None]
         if self.sensor_values is None:
             return out
-        return sensor_model.calibrated(out, w, self.rear, self.sensor_values)
+        return sensor_model.calibrated(out, w, self.layout, self.sensor_values)
 
     def sensing_at(self, theta: np.ndarray) -> np.ndarray:
         """The sensing with θ's calibrated values (the assumed one when θ holds none)."""
         if not self.calibrate:
             return self.sensing
         values = sensor_model.unpack(theta[self.calibration_slice], self.calibrate, self.k)
-        return sensor_model.calibrated(self.sensing, self.omega, self.rear, values)
+        return sensor_model.calibrated(self.sensing, self.omega, self.layout, values)
 
     # --- parameters -------------------------------------------------------------------
     def theta(self, params: np.ndarray, road: float, noise: np.ndarray) -> np.ndarray:
@@ -338,7 +338,7 @@ class FullCarSpectrum:
         """dS (G, nodes, k, k) at θ by the sensors' calibrated values (``calibrate``): S is
         ``P_s (H R Hᴴ) P_sᴴ`` and the body's motion stays."""
         values = sensor_model.unpack(theta[self.calibration_slice], self.calibrate, self.k)
-        d_sensing = sensor_model.derivatives(self.sensing, self.omega, self.rear, values, self.calibrate)
+        d_sensing = sensor_model.derivatives(self.sensing, self.omega, self.layout, values, self.calibrate)
         _, _, _, motion, _ = self.body_motion(theta)
         part = d_sensing @ (motion @ herm(self.sensing_at(theta)))
         return self.fold(part + herm(part))

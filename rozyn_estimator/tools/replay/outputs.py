@@ -210,6 +210,12 @@ def csv_columns(layout: Layout = HALF_LAYOUT) -> tuple[str, ...]:
         "model_fit_p",
         "model_fit",
         *(f"glitches_{c}" for c in layout.channels),
+        # on a drive: held at a stop, the windows fused, the load changes found; what each
+        # channel carries (method.information)
+        "held",
+        "fused_windows",
+        "load_changes",
+        *(f"information_lost_without_{c}" for c in layout.channels),
     )
 
 
@@ -247,7 +253,8 @@ def csv_row(replayed: ReplayedUpdate, layout: Layout = HALF_LAYOUT) -> list[Any]
         modes += [mode.freq_hz, mode.damping_ratio] if mode else ["", ""]
     described = update_values(u, layout)
     budget = [described.get(c, "") if published is not None else "" for c in budget_columns(layout)]
-    tail = ["model_fit_p", "model_fit", *(f"glitches_{c}" for c in layout.channels)]
+    tail = ["model_fit_p", "model_fit", *(f"glitches_{c}" for c in layout.channels), "held", "fused_windows",
+            "load_changes", *(f"information_lost_without_{c}" for c in layout.channels)]
     return [
         f"{u.stamp_ns / NS:.9f}",
         u.stamp_ns,

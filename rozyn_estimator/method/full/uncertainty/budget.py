@@ -25,7 +25,8 @@ from rozyn_estimator.vehicle_full import FullVehicle
 
 _REL_STEP = 1e-5  # share of a value
 ABS_STEP = 1e-6  # m, s or share of a gain
-_GROUPS = {**GROUPS, "track": "tracks", "anti_roll": "anti-roll bars", "sensor_lateral": "sensor positions"}
+_GROUPS = {**GROUPS, "track": "tracks", "anti_roll": "anti-roll bars", "sensor_lateral": "sensor positions",
+           "gyro_misalignment": "gyro turns"}
 _QUADS = {"suspension_stiffness": "suspension_stiffness_npm", "suspension_damping": "suspension_damping_nspm",
           "tyre_stiffness": "tyre_stiffness_npm", "tyre_damping": "tyre_damping_nspm",
           "unsprung_mass": "unsprung_mass_kg"}
@@ -40,7 +41,7 @@ class FullBudget(Budget):
 
     @staticmethod
     def group(key: str) -> str:
-        return next(label for prefix, label in _GROUPS.items() if key.startswith(prefix))
+        return next((label for prefix, label in _GROUPS.items() if key.startswith(prefix)), key)
 
 
 def full_contributions(v: FullVehicle, modes: Sequence[Mode], sensors: Sequence[int], params: np.ndarray,

@@ -56,7 +56,8 @@ _FIXED = 1e-6  # prior std of a value without a tolerance in a calibrated group 
 # each group's tolerance keys (what the budget leaves to the calibration)
 TOLERANCE_KEYS = {"gain": ("sensor_gain_front", "sensor_gain_rear"),
                   "x": ("sensor_front_offset_m", "sensor_rear_offset_m"),
-                  "y": ("sensor_lateral_m",), "delay": ("sensor_time_offset_s",)}
+                  "y": ("sensor_lateral_m",), "delay": ("sensor_time_offset_s",),
+                  "turn": ("gyro_misalignment_rad",)}
 
 
 @dataclass(frozen=True)
@@ -84,7 +85,8 @@ class VehicleCalibration:
     def departures(self) -> list[str]:
         """Notes on the values the data put further from the vehicle file's than ``_DEPARTED``
         tolerances (and posterior std): the file, or the sensor, is off."""
-        return [f"{'sensor' if c.name.startswith('sensor') else 'corner'} calibration: {c.name} {c.text()}: "
+        return [f"{'sensor' if c.name.startswith(('sensor', 'gyro')) else 'corner'} calibration: {c.name} "
+                f"{c.text()}: "
                 "beyond its tolerance, check the vehicle file"
                 for c in self.calibrations if abs(c.estimate) > _DEPARTED * max(c.tolerance, c.std)]
 
@@ -112,8 +114,9 @@ def sensor_groups(vehicle: FullVehicle, sensors: tuple[int, ...]) -> tuple[str, 
     tol = vehicle.tolerances.to_dict()
     late = [vehicle.channel_late[c] for c in sensors]
     both_axles = any(late) and not all(late)
+    gyros = any(vehicle.channel_kinds[c] != "accel_z" for c in sensors)
     return tuple(g for g in sensing.GROUPS if any(tol[key] > 0 for key in TOLERANCE_KEYS[g])
-                 and (g != "delay" or both_axles))
+                 and (g != "delay" or both_axles) and (g != "turn" or gyros))
 
 
 @dataclass(frozen=True)
@@ -177,7 +180,7 @@ def calibrate_vehicle(
     fitted = point[n:]
     calibrations = tuple(Calibration(*_reported(name, labels, float(x), float(sd), float(tol)))
                          for name, x, sd, tol in zip(names, fitted, posterior_std, stds, strict=True)
-                         if not _gyro_position(name, gyros))
+                         if not _held(name, gyros))
     n_sensor = fitted.size - len(corner_keys)
     calibration = VehicleCalibration(groups, _every(fitted[:n_sensor], groups, k), calibrations,
                                      contributions, point[:5].copy(), converged, corner_keys=corner_keys,
@@ -224,23 +227,25 @@ def _tolerance_key(name: str, sensors: tuple[int, ...]) -> tuple[str, int | None
     corner = sensors[int(index)]
     axle = "front" if corner < 2 else "rear"
     return {"ln_gain": f"sensor_gain_{axle}", "sensor_dx": f"sensor_{axle}_offset_m",
-            "sensor_dy": "sensor_lateral_m"}[kind], corner
+            "sensor_dy": "sensor_lateral_m", "gyro_turn": "gyro_misalignment_rad"}[kind], corner
 
 
 def _prior_stds(vehicle: FullVehicle, sensors: tuple[int, ...], names: list[str]) -> np.ndarray:
     """Each calibrated value's tolerance in θ's units (a log gain: the share; m; ms)."""
     tol = vehicle.tolerances.to_dict()
     gyros = [vehicle.channel_kinds[c] != "accel_z" for c in sensors]
-    out = [0.0 if _gyro_position(name, gyros) else
+    out = [0.0 if _held(name, gyros) else
            tol[key] / (sensing.DELAY_SCALE_S if name == "delay_ms" else 1.0)
            for name, (key, _) in ((name, _tolerance_key(name, sensors)) for name in names)]
     return np.maximum(np.array(out), _FIXED)
 
 
-def _gyro_position(name: str, gyros: list[bool]) -> bool:
-    """The calibrated value is a gyro's position (which it does not read: held at the file's)."""
+def _held(name: str, gyros: list[bool]) -> bool:
+    """The calibrated value does not act on its channel (held at the file's by a tight prior): a
+    gyro's position, an accelerometer's turn."""
     kind, _, index = name.rpartition("_")
-    return kind in ("sensor_dx", "sensor_dy") and gyros[int(index)]
+    return (kind in ("sensor_dx", "sensor_dy") and gyros[int(index)]) or (kind == "gyro_turn" and
+                                                                          not gyros[int(index)])
 
 
 def _budget_name(name: str, sensors: tuple[int, ...], labels: tuple[str, ...]) -> str:
@@ -262,7 +267,7 @@ def _reported(name: str, labels: tuple[str, ...], value: float, std: float,
     kind, index = name.rsplit("_", 1)
     corner = labels[int(index)]
     label = {"ln_gain": f"sensor_gain_{corner}", "sensor_dx": f"sensor_x_{corner}_m",
-             "sensor_dy": f"sensor_y_{corner}_m"}[kind]
+             "sensor_dy": f"sensor_y_{corner}_m", "gyro_turn": f"gyro_turn_{corner}_rad"}[kind]
     return label, (math.expm1(value) if kind == "ln_gain" else value), std, tol
 
 

@@ -41,7 +41,8 @@ class Calibration:
         return self.std < 0.5 * self.tolerance
 
     def text(self) -> str:
-        scale, unit = {"s": (1e3, "ms"), "m": (1e3, "mm")}.get(self.name.rsplit("_", 1)[-1], (100.0, "%"))
+        scale, unit = {"s": (1e3, "ms"), "m": (1e3, "mm"), "rad": (57.29577951308232, "°")}.get(
+            self.name.rsplit("_", 1)[-1], (100.0, "%"))
         verdict = "identified by the data" if self.identified else "not identified: its tolerance stands"
         return (f"{self.estimate * scale:+.3g} ± {self.std * scale:.2g} {unit} "
                 f"(tolerance {self.tolerance * scale:.2g} {unit}; {verdict})")
