@@ -134,6 +134,21 @@ def test_mismatch(index):
         assert s.model_warn_share <= 0.05, (case.label, s.model_warn_share)
 
 
+def test_the_sensors_suite_sets_one_imu_against_the_accelerometers_on_both_cars():
+    from rozyn_estimator.vehicle_full import FullVehicle
+
+    half = suite("sensors", TrialSpec(vehicle=SECOND_VEHICLE))
+    assert [c.spec.vehicle.sensors is not None for c in half] == [False, True, True]
+    assert half[1].spec.vehicle.channel_names == ("imu.accel_z", "imu.gyro_y")
+    assert half[1].spec.vehicle.tolerances.any is False and half[2].spec.vehicle.tolerances.any
+    full = suite("sensors", TrialSpec(vehicle=FullVehicle()))
+    kinds = [c.spec.vehicle.channel_kinds for c in full]
+    assert kinds[0] == ("accel_z",) * 4 and kinds[1] == ("accel_z", "gyro_x", "gyro_y")
+    assert kinds[3] == ("accel_z", "gyro_x", "gyro_y", "accel_z") and kinds[4] == ("accel_z",) * 3
+    assert full[-1].spec.departures.gyro_yaw_misalignment_rad > 0 and full[-1].bars.coverage[1] == 1.0
+    assert all(c.spec.noise_fraction == 0.1 and c.spec.duration_s == 120.0 for c in full)
+
+
 def test_the_drive_cycles_suite_drives_each_shipped_cycle_on_both_cars():
     from rozyn_estimator.vehicle_full import FullVehicle
 

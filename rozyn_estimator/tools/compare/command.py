@@ -40,10 +40,10 @@ _ALL_SUITES = tuple(dict.fromkeys(s for names in SUITES.values() for s in names)
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", choices=tuple(CARS), default="half",
                    help="half (default) or full: the 7-DOF full car on two road tracks (methods likelihood "
-                        "and rozyn; suites acceptance and mismatch; --vehicle a full-car file)")
+                        f"and rozyn; suites {', '.join(SUITES['full'])}; --vehicle a full-car file)")
     p.add_argument("--suite", choices=_ALL_SUITES,
-                   help="run a named set of cases (overrides the road and sensor options): methods, "
-                        "acceptance, robustness or mismatch (the full car: acceptance, mismatch)")
+                   help="run a named set of cases (overrides the road and sensor options): "
+                        f"{', '.join(SUITES['half'])} (the full car: {', '.join(SUITES['full'])})")
     p.add_argument("--methods", default=None,
                    help=f"comma list of methods (default: {','.join(DEFAULT_METHODS)}, those the car has; "
                         f"known: {', '.join(METHODS)})")

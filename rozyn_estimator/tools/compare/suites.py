@@ -13,7 +13,9 @@ The half car's:
 The full car's ``acceptance`` (four speeds and a Laplace road) and ``mismatch`` (the same
 departures at every corner). Both cars' ``drive-cycles``: 300 s of each shipped cycle from its
 start (urban, highway, WLTC), one with the heights given (the load transfer on), one with the
-default tolerances. ``methods``, ``acceptance`` and ``robustness`` measure the
+default tolerances. Both cars' ``sensors``: one IMU against the accelerometers on the same
+roads (the full car's mixed sets and a turned IMU too). ``methods``, ``acceptance`` and
+``robustness`` measure the
 estimator on the simulator's own vehicle known exactly (``tolerances: {}``), whatever
 tolerances the base vehicle carries.
 """
@@ -21,18 +23,21 @@ tolerances the base vehicle carries.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Any, cast
 
 from rozyn_estimator.errors import ConfigError
+from rozyn_estimator.sensors import Sensor, SensorSet
 from rozyn_estimator.tolerances import Tolerances
+from rozyn_estimator.tools.options import with_sensor_preset
 from rozyn_estimator.tools.trial.spec import TrialSpec
 from rozyn_estimator.vehicle import Vehicle
-from rozyn_estimator.vehicle_full import FullTolerances
+from rozyn_estimator.vehicle_full import CORNERS, FullTolerances
 from sim_node.departures import Departures
 
-SUITES = {"half": ("methods", "acceptance", "robustness", "mismatch", "drive-cycles"),
-          "full": ("acceptance", "mismatch", "drive-cycles")}
+SUITES = {"half": ("methods", "acceptance", "robustness", "mismatch", "drive-cycles", "sensors"),
+          "full": ("acceptance", "mismatch", "drive-cycles", "sensors")}
 
 
 @dataclass(frozen=True)
@@ -81,6 +86,8 @@ def suite(name: str, base: TrialSpec) -> list[Case]:
     noisy = iso.replace(noise_fraction=0.1)
     if name == "drive-cycles":
         return _drive_cycles(noisy, base.vehicle)
+    if name == "sensors":
+        return _sensor_sets(noisy.replace(duration_s=120.0), base.vehicle)
     if car == "full":
         return _full_acceptance(noisy) if name == "acceptance" else \
             _full_mismatch(noisy.replace(duration_s=120.0, vehicle=base.vehicle))
@@ -186,6 +193,35 @@ def _drive_cycles(noisy: TrialSpec, vehicle: Any) -> list[Case]:
         Case("urban, the vehicle's own tolerances", drive.replace(drive_cycle="udds", vehicle=vehicle),
              COVERS),
     ]
+
+
+def _sensor_sets(noisy: TrialSpec, vehicle: Any) -> list[Case]:
+    """The accelerometers (the half car's two at the axles, the full car's four at the corners)
+    and one IMU (``rozyn trial --sensors imu``'s) on the same roads, the vehicle known exactly,
+    10 % noise of each channel's rms; the IMU with the vehicle's own tolerances; the full car's
+    mixed sets (an IMU and an accelerometer at the rear axle's centre; three corner
+    accelerometers) and an IMU turned 2° about z, with its own tolerances."""
+    bars = Bars(bias_pct=0.5)
+    exact = noisy.vehicle
+    imu = with_sensor_preset(exact, "imu")
+    toleranced = with_sensor_preset(vehicle, "imu")
+    cases = [Case("the accelerometers", noisy.replace(vehicle=exact.with_sensors(None)), bars),
+             Case("one IMU", noisy.replace(vehicle=imu), bars),
+             Case("one IMU, the vehicle's own tolerances", noisy.replace(vehicle=toleranced), COVERS)]
+    if isinstance(exact, Vehicle):
+        return cases
+    own = imu.sensors.sensors[0]
+    x, y = exact.corner_x_m, exact.corner_y_m
+    mixed = SensorSet((own, Sensor("rear", "/accel/rear", exact.wheelbase_m, 0.0)))
+    three = SensorSet(tuple(Sensor(c, f"/accel/{c}", x[i], y[i]) for i, c in enumerate(CORNERS[:3])))
+    turn = Departures(gyro_yaw_misalignment_rad=math.radians(2.0))
+    turned = noisy.replace(vehicle=toleranced, departures=turn)
+    return [*cases,
+            Case("one IMU and an accelerometer at the rear axle",
+                 noisy.replace(vehicle=exact.with_sensors(mixed)), bars),
+            Case("three corner accelerometers (FL, FR, RL)", noisy.replace(vehicle=exact.with_sensors(three)),
+                 bars),
+            Case("one IMU turned 2 deg about z, its own tolerances", turned, COVERS)]
 
 
 def _full_acceptance(noisy: TrialSpec) -> list[Case]:
