@@ -182,13 +182,14 @@ def half_car_channels(sensors: SensorSet, wheelbase_m: float) -> tuple[Channel, 
     """
     off_line = [s.name for s in sensors.sensors if s.y_m != 0.0]
     if off_line:
-        raise ConfigError(f"sensors: {', '.join(off_line)} sits off the centreline (y_m != 0), and the half "
-                          "car does not roll: give y_m: 0 (off the centreline a sensor sees roll, which the "
-                          "half car does not model)")
+        raise ConfigError(f"sensors: {', '.join(off_line)} sits off the centreline (y_m != 0), where it sees "
+                          "roll, and the half car does not roll: give y_m: 0, or describe the car as a full "
+                          "car (model: full), whose model carries the roll (with a gyro_x channel)")
     chans = sensors.channels
     rolls = [c.label for c in chans if c.kind == "gyro_x"]
     if rolls:
-        raise ConfigError(f"sensors: {', '.join(rolls)}: the half car does not roll; leave gyro_x out")
+        raise ConfigError(f"sensors: {', '.join(rolls)}: the half car does not roll; leave gyro_x out (or "
+                          "describe the car as a full car, model: full)")
     accels = [c for c in chans if c.kind == "accel_z"]
     gyros = [c for c in chans if c.kind == "gyro_y"]
     if not accels:
