@@ -113,6 +113,29 @@ def test_an_unchanged_load_is_not_a_change():
     assert changes == 0
 
 
+def test_calibrated_values_that_vary_between_windows_are_no_load_change():
+    """A full car's windows each calibrate their sensors and corners afresh, so their estimates
+    scatter by the calibrated values' varying part too (its budget's ``varying``), which the test
+    counts; without it the same scatter read as load changes (with the default tolerances, 19 in
+    6 urban drives of the full car)."""
+    rng = np.random.default_rng(3)
+    base, stat_std = np.array([1000.0, 2000.0, 1.2]), np.array([2.0, 8.0, 0.002])
+    var = np.array([8.0, 20.0, 0.006])
+    found = {}
+    for counted in (True, False):
+        found[counted] = 0
+        for _ in range(20):
+            fusion = Fusion()
+            stop = (int(400 * S), int(410 * S))
+            for lo, hi in _windows(0.0, 14):
+                params = base + stat_std * rng.standard_normal(3) + var * rng.standard_normal()
+                budget = Budget(np.diag(stat_std**2), {"k": var}, varying={"k": var} if counted else {})
+                est = Estimate(status="ok", params=params, covariance=budget.total, budget=budget)
+                fusion.add(est, lo, hi, [stop] if lo < stop[0] < hi else [])
+            found[counted] += len(fusion.changes)
+    assert found[True] == 0 and found[False] >= 5
+
+
 def test_a_window_holding_data_from_before_the_change_publishes_the_estimate_since():
     fusion = Fusion()
     _drive(fusion, [1000.0, 2000.0, 1.2], [1150.0, 2047.0, 1.278], count=10)  # found at 540 s

@@ -259,6 +259,10 @@ def test_a_turned_imu_is_calibrated_not_mistaken_for_the_cog():
     values = update_values(Update(1, OK, "ok", e), layout_of(v))  # as the node's diagnostics say it
     assert values["calibrated gyro_turn_imu.gyro_y_rad"].endswith("identified by the data)")
     assert all(values[f"{name}_budget"] for name in FULL_PARAM_NAMES)
+    # what varies between windows (the load change's test counts it): part of the calibrated values'
+    calibrated = sum(np.outer(c, c) for key, c in e.budget.contributions.items() if key in e.budget.varying)
+    varying = e.budget.between_windows - e.budget.statistical
+    assert 0 < np.trace(varying) <= np.trace(calibrated) * (1 + 1e-9)
     told = imu_car()  # every tolerance 0: the turn is not fitted
     blind = estimate_full(y, 100.0, told, PipelineConfig(), speed_mps=SPEED_MPS)
     assert abs(blind.params[4] - truth[4]) > 5 * blind.std[4]

@@ -58,6 +58,9 @@ class Budget:
     statistical: np.ndarray  # (k, k), k = len(NAMES)
     contributions: dict[str, np.ndarray] = field(default_factory=dict)  # key -> (k,) shift per 1 u
     calibration: tuple[Calibration, ...] = ()
+    # of the contributions, the data-calibrated values' part that varies from window to window
+    # (each window calibrates them afresh; the rest is common to every window)
+    varying: dict[str, np.ndarray] = field(default_factory=dict)
 
     @staticmethod
     def group(key: str) -> str:
@@ -74,6 +77,13 @@ class Budget:
     @property
     def total(self) -> np.ndarray:
         return self.statistical + self.systematic
+
+    @property
+    def between_windows(self) -> np.ndarray:
+        """How the estimate varies between windows of the same vehicle: the statistical part and
+        the calibrated values' varying part."""
+        return self.statistical + sum((np.outer(c, c) for c in self.varying.values()),
+                                      np.zeros(self.statistical.shape))
 
     def by_group(self, i: int) -> list[tuple[str, float]]:
         """(contributor, std) for parameter ``i``, largest first, statistics included."""

@@ -201,8 +201,10 @@ def _refine_window(y: np.ndarray, gated: tuple[int, ...], fs_hz: float, vehicle:
     ref = refine_full(y, fs_hz, vehicle, index, quick.params, 0.0 if speed_mps is None else speed_mps,
                       cfg.likelihood, warm=warm)
     if ref.ok and ref.params is not None and ref.covariance is not None:
-        calibrated = () if ref.calibration is None else ref.calibration.calibrations
-        budget = FullBudget(ref.covariance, ref.contributions, calibrated) if vehicle.tolerances.any else None
+        cal = ref.calibration
+        budget = None if not vehicle.tolerances.any else \
+            FullBudget(ref.covariance, ref.contributions, () if cal is None else cal.calibrations,
+                       {} if cal is None else cal.varying)
         fit = ref.model_fit
         check = () if fit is None or fit.ok else (f"model check: {fit.verdict}",)
         return FullEstimate(status="ok", params=ref.params,

@@ -74,6 +74,9 @@ class VehicleCalibration:
     age: int = 0  # the later windows that took it over
     corner_keys: tuple[str, ...] = ()  # the calibrated corner values' tolerance keys (:mod:`.corners`)
     corner_shares: np.ndarray = field(default_factory=lambda: np.zeros(0))  # their departures (shares)
+    # the part of the contributions that varies from window to window: each window's data
+    # calibrate the values afresh (the posterior mean's spread about the truth, M - M P⁻¹ M)
+    varying: dict[str, np.ndarray] = field(default_factory=dict)
 
     def holds(self, theta: np.ndarray) -> bool:
         """A warm update may take it over (values and contributions): the body's parameters
@@ -176,7 +179,8 @@ def calibrate_vehicle(
                         _CONVERGED, max_iter)
         point, converged = found.x, bool(found.get("success")) or posterior.decrement(found.x) < _CONVERGED
         info = posterior.information(point)
-    contributions, posterior_std = _contributions(info, model, point, precision[n:], base.sensors, labels)
+    contributions, posterior_std, varying = _contributions(info, model, point, precision[n:], base.sensors,
+                                                           labels)
     fitted = point[n:]
     calibrations = tuple(Calibration(*_reported(name, labels, float(x), float(sd), float(tol)))
                          for name, x, sd, tol in zip(names, fitted, posterior_std, stds, strict=True)
@@ -184,7 +188,7 @@ def calibrate_vehicle(
     n_sensor = fitted.size - len(corner_keys)
     calibration = VehicleCalibration(groups, _every(fitted[:n_sensor], groups, k), calibrations,
                                      contributions, point[:5].copy(), converged, corner_keys=corner_keys,
-                                     corner_shares=fitted[n_sensor:].copy())
+                                     corner_shares=fitted[n_sensor:].copy(), varying=varying)
     return point[:n], calibration, Posterior(posterior, point)
 
 
@@ -200,20 +204,28 @@ def _shares_valid(model: FullCarSpectrum | CornerCalibrating, point: np.ndarray)
 def _contributions(
     info: np.ndarray, model: FullCarSpectrum | CornerCalibrating, point: np.ndarray, precision: np.ndarray,
     sensors: tuple[int, ...], labels: tuple[str, ...],
-) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """(each calibrated value's contribution (5,) to the estimate, the values' posterior std)
-    from the data's information ``info`` of the augmented ``model``: the module docstring's
-    split of ``A M Aᵀ``, ``M`` the values' posterior covariance."""
+) -> tuple[dict[str, np.ndarray], np.ndarray, dict[str, np.ndarray]]:
+    """(each calibrated value's contribution (5,) to the estimate, the values' posterior std, the
+    contributions' part that varies between windows) from the data's information ``info`` of the
+    augmented ``model``: the module docstring's split of ``A M Aᵀ``, ``M`` the values' posterior
+    covariance; the varying part ``A (M - M P⁻¹ M) Aᵀ``, the spread of a window's posterior mean
+    about the truth (``P`` the prior's: a value the data pin down varies as ``M``, one they do
+    not as nothing)."""
     n = model.calibration_slice.start
     F, shared = ridged(info[:n, :n]), info[:n, n:]
     A = np.linalg.solve(F, shared)
     M = np.linalg.inv(info[n:, n:] + np.diag(precision) - shared.T @ A)
-    lam, vec = np.linalg.eigh(0.5 * (M + M.T))
-    root = (vec * np.sqrt(np.clip(lam, 0.0, None))) @ vec.T
-    per_value = model.physical_jacobian(point)[:, :n] @ A @ root
-    names = model.names[model.calibration_slice]
-    return ({_budget_name(name, sensors, labels): per_value[:, j] for j, name in enumerate(names)},
-            np.sqrt(np.clip(np.diag(M), 0.0, None)))
+    to_params = model.physical_jacobian(point)[:, :n] @ A
+    names = [_budget_name(name, sensors, labels) for name in model.names[model.calibration_slice]]
+    per_value, varying = (to_params @ _root(C) for C in (M, M - M @ np.diag(precision) @ M))
+    return ({name: per_value[:, j] for j, name in enumerate(names)}, np.sqrt(np.clip(np.diag(M), 0.0, None)),
+            {name: varying[:, j] for j, name in enumerate(names)})
+
+
+def _root(C: np.ndarray) -> np.ndarray:
+    """The symmetric square root of a covariance (its negative eigenvalues, rounding, as 0)."""
+    lam, vec = np.linalg.eigh(0.5 * (C + C.T))
+    return (vec * np.sqrt(np.clip(lam, 0.0, None))) @ vec.T
 
 
 def _tolerance_key(name: str, sensors: tuple[int, ...]) -> tuple[str, int | None]:
