@@ -24,7 +24,7 @@ _RIDGE = 1e-12  # on the correlation form: a parameter the rest cannot tell has 
 
 
 def information_lost(S: np.ndarray, dS: np.ndarray, weights: np.ndarray | None,
-                     jac: np.ndarray) -> np.ndarray:
+                     jac: np.ndarray, every: int = 1) -> np.ndarray:
     """(k, q) the share of each of the ``q`` parameters' information lost without each channel.
 
     Args:
@@ -32,9 +32,12 @@ def information_lost(S: np.ndarray, dS: np.ndarray, weights: np.ndarray | None,
         dS: (p, K, k, k) their derivatives by the fit's parameters θ.
         weights: (K,) what each frequency counts for (None: 1).
         jac: (q, p) d(parameters)/dθ.
+        every: sum over every ``every``-th frequency only (the shares are smooth in frequency:
+            every 12th bin gave the half car's to 0.1 % at a tenth of the work, 1-2 ms).
     """
-    k = S.shape[-1]
-    w = np.ones(S.shape[0]) if weights is None else np.asarray(weights, dtype=float).ravel()
+    k, at = S.shape[-1], slice(every // 2, None, every)
+    S, dS = S[at], dS[:, at]
+    w = np.ones(S.shape[0]) if weights is None else np.asarray(weights, dtype=float).ravel()[at]
     full = _fisher(S, dS, w)
     seen = np.diag(full) > 0
     var_all = _variances(full, jac, seen)
@@ -56,11 +59,17 @@ def describe(lost: Sequence[float], params: Sequence[str]) -> str:
 
 
 def _fisher(S: np.ndarray, dS: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """``Σ_f w_f tr(S⁻¹ ∂_i S S⁻¹ ∂_j S)`` as ``R Rᵀ``, ``R`` the whitened ``L⁻¹ ∂S L⁻ᴴ``."""
+    """``Σ_f w_f tr(S⁻¹ ∂_i S S⁻¹ ∂_j S)`` as ``R Rᵀ``, ``R`` the whitened ``L⁻¹ ∂S L⁻ᴴ``'s real
+    and imaginary parts. The parameters ride in the matrices' columns (one (k, p k) product
+    per frequency, not p tiny ones) and the sum is a real product: numpy's batched products of
+    tiny complex matrices cost several times as much."""
+    p, K, k, _ = dS.shape
     linv = np.linalg.inv(np.linalg.cholesky(S))
-    white = linv[None] @ dS @ linv.conj().swapaxes(-1, -2)[None]
-    rows = (white * np.sqrt(w)[None, :, None, None]).reshape(dS.shape[0], -1)
-    return np.real(rows @ rows.conj().T)
+    left = linv @ dS.transpose(1, 2, 0, 3).reshape(K, k, p * k)  # (K, a, (p, b)): L⁻¹ ∂S
+    both = left.reshape(K, k * p, k) @ (linv.conj().swapaxes(-1, -2) * np.sqrt(w)[:, None, None])
+    white = both.reshape(K, k, p, k).transpose(2, 0, 1, 3).reshape(p, -1)
+    rows = np.concatenate([white.real, white.imag], axis=1)
+    return rows @ rows.T
 
 
 def _variances(info: np.ndarray, jac: np.ndarray, used: np.ndarray) -> np.ndarray:

@@ -264,7 +264,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     if objective.decrement(theta) >= (cfg.tol if calibration is None else cfg.tol_calibrated) or \
             (calibration is not None and not calibration.converged):
         notes.append(f"likelihood fit: not converged in {cfg.max_iter} iterations")
-    k, lost = model.index, information_lost(*objective.sampled_model(theta), jac)
+    k, lost = model.index, information_lost(*objective.sampled_model(theta), jac, every=4)  # every 12th bin
     return FullRefinement(
         status="ok", params=params, covariance=0.5 * (cov + cov.T), theta=theta, names=tuple(model.names),
         neg_log_likelihood=float(best.fun), iterations=iterations, starts=starts, band_hz=band,

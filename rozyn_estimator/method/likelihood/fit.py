@@ -287,9 +287,9 @@ def _refine(
 
 def _information_lost(objective: WhittleObjective, theta: np.ndarray) -> tuple[tuple[float, ...], ...]:
     """Each channel's share of each parameter's information (:mod:`rozyn_estimator.method.information`),
-    over every sixth bin (it is smooth in frequency: a sixth of the work)."""
-    S, dS = objective.model_at(theta)
-    lost = information_lost(S[2::6], dS[:, 2::6], None, objective.model.physical_jacobian(theta))
+    over every 12th bin."""
+    jac = objective.model.physical_jacobian(theta)
+    lost = information_lost(*objective.model_at(theta), None, jac, every=12)
     return tuple(tuple(float(x) for x in row) for row in lost)
 
 
