@@ -14,7 +14,9 @@ KEYS = ("sim_100s_at_100hz_ms", "road_generation_ms", "update_120s_window_ms",
         "refined_cold_per_rozyn_update", "budget_overhead_pct",
         "glitch_per_clean_update", "full_refined_update_cold_ms", "full_refined_update_warm_ms",
         "full_refined_warm_per_half", "full_refined_cold_per_half", "urban_update_cold_ms",
-        "urban_update_warm_ms", "urban_cold_per_constant", "urban_warm_per_constant", "peak_rss_mb", "goals")
+        "urban_update_warm_ms", "urban_cold_per_constant", "urban_warm_per_constant", "imu_update_warm_ms",
+        "imu_warm_per_accelerometers", "full_imu_update_warm_ms", "full_imu_warm_per_accelerometers",
+        "peak_rss_mb", "goals")
 
 
 def test_bench_reports_the_refined_studys_rate_next_to_the_others(monkeypatch):
@@ -25,7 +27,7 @@ def test_bench_reports_the_refined_studys_rate_next_to_the_others(monkeypatch):
         return 10.0 if method else 100.0
 
     def paired(fns, repeats: int) -> list[float]:
-        assert len(fns) == 2  # the full car's update, then the half car's
+        assert len(fns) == 2  # the full car's then the half car's; an IMU's then the accelerometers'
         return [3.0, 1.5]
 
     monkeypatch.setattr(bench, "_median_ms", lambda fn, repeats: 1.0)
@@ -40,6 +42,8 @@ def test_bench_reports_the_refined_studys_rate_next_to_the_others(monkeypatch):
     assert out["full_refined_warm_per_half"] == 2.0 and out["goals"]["full_refined_warm_per_half"] == 3.0
     # an urban window's update per the constant-speed one's, timed in turn with it (goal <= 1.5x)
     assert out["urban_warm_per_constant"] == 2.0 and out["goals"]["urban_warm_per_constant"] == 1.5
+    # one IMU's update per the accelerometers', either car, timed in turn with it
+    assert out["imu_warm_per_accelerometers"] == 2.0 and out["full_imu_update_warm_ms"] == 3.0
 
 
 def test_paired_timings_run_the_functions_in_turn_and_report_each_ones_median(monkeypatch):

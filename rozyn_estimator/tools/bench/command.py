@@ -25,12 +25,13 @@ import numpy as np
 from rozyn_estimator.method import METHODS, PipelineConfig, estimate
 from rozyn_estimator.method.full import estimate_full
 from rozyn_estimator.tolerances import Tolerances
+from rozyn_estimator.tools.options import with_sensor_preset
 from rozyn_estimator.tools.trial.run import limit_threads
 from rozyn_estimator.tools.trial.spec import TrialSpec
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import FullVehicle
 from sim_node.road import Road, RoadSpec
-from sim_node.sensors import MEMS_NOISE_MPS2
+from sim_node.sensors import MEMS_GYRO_NOISE_RADPS, MEMS_NOISE_MPS2
 from sim_node.simulation import SimConfig, Simulation
 
 HELP = "time the simulator and the pipeline (JSON)"
@@ -139,6 +140,37 @@ def _urban_figures(repeats: int, half_warm: Callable[[], Any],
             "urban_warm_per_constant": warm_ms / constant_warm_ms}
 
 
+def _imu_figures(repeats: int) -> dict[str, float]:
+    """One IMU's warm refined update (``--sensors imu``'s: the half car's accel_z and gyro_y, the
+    full car's with gyro_x), and per the accelerometers' (two at the axles, four at the corners)
+    timed in turn with it (Gaussian ISO A, 100 km/h, MEMS noise, the default tolerances)."""
+    out: dict[str, float] = {}
+    for prefix, base in (("", Vehicle()), ("full_", FullVehicle())):
+        imu_ms, accel_ms = _paired_ms([_warm_update(with_sensor_preset(base, "imu")), _warm_update(base)],
+                                      max(3, repeats // 2))
+        out[f"{prefix}imu_update_warm_ms"] = imu_ms
+        out[f"{prefix}imu_warm_per_accelerometers"] = imu_ms / accel_ms
+    return out
+
+
+def _warm_update(vehicle: Vehicle | FullVehicle) -> Callable[[], Any]:
+    """The next window's refined update (5 s later, from this one's) of ``vehicle``'s sensors."""
+    car: dict[str, Any] = {"model": "full", "full_vehicle": vehicle} if isinstance(vehicle, FullVehicle) \
+        else {"vehicle": vehicle}
+    live = Simulation(SimConfig(**car, road=RoadSpec(amplitudes="gaussian"), seed=3,
+                                noise_std_mps2=MEMS_NOISE_MPS2, gyro_noise_std_radps=MEMS_GYRO_NOISE_RADPS))
+    window = live.run(120.0).accel_mps2
+    nxt = np.vstack([window[500:], live.run(5.0).accel_mps2])
+    speed = live.config.speed_mps
+    if isinstance(vehicle, FullVehicle):
+        full = vehicle
+        warm_full = estimate_full(window, 100.0, full, PipelineConfig(), speed)
+        return lambda: estimate_full(nxt, 100.0, full, PipelineConfig(), speed, warm=warm_full)
+    half = vehicle
+    warm = estimate(window, 100.0, half, PipelineConfig(), speed)
+    return lambda: estimate(nxt, 100.0, half, PipelineConfig(), speed, warm_start=warm)
+
+
 def _peak_rss_mb() -> float:
     scale = 1024.0 if sys.platform != "darwin" else 1024.0 * 1024.0
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / scale
@@ -200,6 +232,7 @@ def run_bench(repeats: int = 20) -> dict[str, Any]:
     out |= _urban_figures(
         repeats, lambda: estimate(nxt, 100.0, vehicle, PipelineConfig(), speed, warm_start=warm),
         lambda: estimate(window, 100.0, vehicle, PipelineConfig(), speed))
+    out |= _imu_figures(repeats)
     out["peak_rss_mb"] = _peak_rss_mb()
     out["goals"] = {"sim_100s_at_100hz_ms": 20.0, "update_120s_window_ms": 10.0,
                     "refined_update_warm_ms": 20.0, "refined_update_cold_ms": 60.0,
