@@ -142,37 +142,36 @@ def full_car_sensor_points(v: FullVehicle) -> np.ndarray:
     return np.column_stack([v.sensor_x_m, v.sensor_y_m])
 
 
+GYRO_ROWS = {"gyro_x": (0.0, 0.0, 1.0), "gyro_y": (0.0, -1.0, 0.0)}
+"""A gyro's row on the body's ``(z₀, φ, θ)`` rates (:func:`full_car_channel_rows`): ``gyro_x``
+(REP 103: left side up) ``θ'``, ``gyro_y`` (nose down; ``φ`` is nose up) ``-φ'``."""
+
+
+def full_car_channel_rows(vehicle: FullVehicle, sensors: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
+    """((k, 3) each channel's row on the body's ``(z₀, φ, θ)`` (``z₀`` at the front axle's centre:
+    :mod:`rozyn_estimator.method.full.spectrum`), (k,) bool: the channel reads the rate, a gyro).
+    An accelerometer at ``(x, y)`` reads ``(1, -x, y)``, a gyro its :data:`GYRO_ROWS` row."""
+    kinds = [vehicle.channel_kinds[c] for c in sensors]
+    xs, ys = np.asarray(vehicle.sensor_x_m)[list(sensors)], np.asarray(vehicle.sensor_y_m)[list(sensors)]
+    rows = np.array([GYRO_ROWS.get(kind, (1.0, -x, y)) for kind, x, y in zip(kinds, xs, ys, strict=True)])
+    return rows.reshape(len(kinds), 3), np.array([kind in GYRO_ROWS for kind in kinds])
+
+
 def full_car_sensor_rows(v: FullVehicle) -> np.ndarray:
-    """(k, 7) map from ``q`` to what the channels read: an accelerometer the body's vertical
-    motion at its point, ``gyro_y`` (REP 103: positive nose down) ``-phi``, ``gyro_x`` (left side
-    up) ``theta``; a gyro reads its row's rate (:func:`full_car_sensor_rates`)."""
-    kinds = v.channel_kinds
-    rows = full_car_body_rows(v, full_car_sensor_points(v)[: len(kinds)])
-    for i, kind in enumerate(kinds):
-        if kind != "accel_z":
-            rows[i] = 0.0
-            rows[i, FULL_PITCH if kind == "gyro_y" else FULL_ROLL] = -1.0 if kind == "gyro_y" else 1.0
+    """(k, 7) map from ``q`` to what the channels read (:func:`full_car_channel_rows` in ``q``'s
+    coordinates: ``z₀ = x_s + lf phi - y_cog theta``); a gyro reads its row's rate
+    (:func:`full_car_sensor_rates`)."""
+    body, _ = full_car_channel_rows(v, range(len(v.channel_kinds)))
+    rows = np.zeros((body.shape[0], FULL_DOF))
+    rows[:, FULL_HEAVE] = body[:, 0]
+    rows[:, FULL_PITCH] = v.cog_from_front_axle_m * body[:, 0] + body[:, 1]
+    rows[:, FULL_ROLL] = body[:, 2] - v.cog_lateral_m * body[:, 0]
     return rows
 
 
 def full_car_sensor_rates(v: FullVehicle) -> np.ndarray:
     """(k,) bool: the channel reads its row's rate (a gyro), not its acceleration."""
-    return np.array([kind != "accel_z" for kind in v.channel_kinds])
-
-
-def full_car_channel_rows(vehicle: FullVehicle, sensors: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
-    """((k, 3) each channel's row on the body's ``(z₀, φ, θ)`` (``z₀`` at the front axle's centre:
-    :mod:`rozyn_estimator.method.full.spectrum`), (k,) bool: the channel reads the
-    rate, a gyro). An accelerometer at ``(x, y)`` reads ``(1, -x, y)``; ``gyro_y`` (REP 103:
-    positive nose down; ``φ`` is nose up) ``(0, -1, 0)``; ``gyro_x`` (left side up) ``(0, 0, 1)``."""
-    kinds = [vehicle.channel_kinds[c] for c in sensors]
-    xs, ys = np.asarray(vehicle.sensor_x_m)[list(sensors)], np.asarray(vehicle.sensor_y_m)[list(sensors)]
-    rows = np.column_stack([np.ones(len(kinds)), -xs, ys])
-    rows[[kind != "accel_z" for kind in kinds]] = 0.0
-    for i, kind in enumerate(kinds):
-        if kind != "accel_z":
-            rows[i, 1 if kind == "gyro_y" else 2] = -1.0 if kind == "gyro_y" else 1.0
-    return rows, np.array([kind != "accel_z" for kind in kinds])
+    return full_car_channel_rows(v, range(len(v.channel_kinds)))[1]
 
 
 def full_car_model(v: FullVehicle) -> SecondOrderModel:

@@ -21,6 +21,7 @@ channels through :func:`rozyn_estimator.body_model.half_car_sensor_rows`.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -223,6 +224,7 @@ def same_positions(given: Any, placed: Sequence[float]) -> bool:
         return False
 
 
+@functools.lru_cache(maxsize=64)  # the model reads a vehicle's channels at every move of its budget
 def full_car_channels(sensors: SensorSet, wheelbase_m: float, track_m: float) -> tuple[Channel, ...]:
     """The channels the full car fits (every channel of the block, in its order); ConfigError
     (one line naming what is missing) for a set that cannot identify heave, pitch and roll.

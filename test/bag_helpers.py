@@ -91,8 +91,10 @@ def check_bag(path: Path) -> dict[str, int]:
     return counts
 
 
-def imu_message(store, stamp_ns: int, z: float, frame_id: str = "accel_front_link"):
-    """A sensor_msgs/Imu as the sim publishes it (rosbags message object)."""
+def imu_message(store, stamp_ns: int, z: float, frame_id: str = "accel_front_link",
+                rates: tuple[float, float] | None = None):
+    """A sensor_msgs/Imu as the sim publishes it (rosbags message object); with ``rates`` its
+    gyros' ``angular_velocity.x`` and ``.y``."""
     t = store.types
     stamp = t["builtin_interfaces/msg/Time"](sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)
     vec = t["geometry_msgs/msg/Vector3"]
@@ -103,8 +105,8 @@ def imu_message(store, stamp_ns: int, z: float, frame_id: str = "accel_front_lin
         header=t["std_msgs/msg/Header"](stamp=stamp, frame_id=frame_id, **ros1),
         orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
         orientation_covariance=unknown,
-        angular_velocity=vec(x=0.0, y=0.0, z=0.0),
-        angular_velocity_covariance=unknown,
+        angular_velocity=vec(x=0.0, y=0.0, z=0.0) if rates is None else vec(x=rates[0], y=rates[1], z=0.0),
+        angular_velocity_covariance=unknown if rates is None else cov,
         linear_acceleration=vec(x=0.0, y=0.0, z=z),
         linear_acceleration_covariance=cov,
     )
@@ -198,3 +200,15 @@ def z_values(reader, topic="/accel/front") -> list[float]:
     for batch in reader.batches([topic], size=100):
         out += fr.read(batch.messages)[1][:, 0].tolist()
     return out
+
+
+def write_imu_bag(path: Path, accel_z: np.ndarray, gyro_x: np.ndarray, gyro_y: np.ndarray) -> None:
+    """A rosbag2 MCAP of one ``/imu/data`` topic at 100 Hz from 1 s on (:func:`imu_message`s)."""
+    store = default_typestore()
+    with BagWriter(path) as writer:
+        topic = writer.add_topic("/imu/data", IMU, [SENSOR_QOS])
+        samples = zip(accel_z.tolist(), gyro_x.tolist(), gyro_y.tolist(), strict=True)
+        for k, (az, gx, gy) in enumerate(samples):
+            ns = NS + k * NS // 100
+            msg = imu_message(store, ns, az, "imu_link", (gx, gy))
+            writer.write(topic, ns, bytes(store.serialize_cdr(msg, IMU)))

@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import yaml
-from rosbags.typesys import Stores, get_typestore
+from bag_helpers import write_imu_bag
 
-from rozyn_estimator.bag import SENSOR_QOS, BagWriter, open_bag
+from rozyn_estimator.bag import open_bag
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
@@ -162,21 +162,7 @@ def test_a_bag_of_one_imu_topic_replays_with_the_vehicle_file(tmp_path):
     path.write_text(yaml.safe_dump({"vehicle": {"tolerances": exact, "sensors": IMU_BLOCK}}))
     block = Simulation(SimConfig(vehicle=v, seed=4, duration_s=125)).run(125)
     y = noisy(block.accel_mps2, 0.05, 4)
-    store = get_typestore(Stores.ROS2_JAZZY)
-    t, vec = store.types, store.types["geometry_msgs/msg/Vector3"]
-    unknown = np.array([-1.0, *[0.0] * 8])
-    with BagWriter(tmp_path / "bag") as writer:
-        topic = writer.add_topic("/imu/data", "sensor_msgs/msg/Imu", [SENSOR_QOS])
-        for k, (az, gy) in enumerate(y.tolist()):
-            ns = 1_000_000_000 + k * 10_000_000
-            msg = t["sensor_msgs/msg/Imu"](
-                header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](
-                    sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id="imu_link"),
-                orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
-                orientation_covariance=unknown, angular_velocity=vec(x=0.0, y=gy, z=0.0),
-                angular_velocity_covariance=np.zeros(9), linear_acceleration=vec(x=0.0, y=0.0, z=az),
-                linear_acceleration_covariance=np.zeros(9))
-            writer.write(topic, ns, bytes(store.serialize_cdr(msg, "sensor_msgs/msg/Imu")))
+    write_imu_bag(tmp_path / "bag", y[:, 0], np.zeros(len(y)), y[:, 1])
     with open_bag(tmp_path / "bag") as reader:
         options = ReplayOptions(vehicle=str(path), speed_mps=SPEED_MPS, window_s=120.0)
         config, _ = resolve_config(reader, options)

@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import yaml
-from rosbags.typesys import Stores, get_typestore
+from bag_helpers import write_imu_bag
 
-from rozyn_estimator.bag import SENSOR_QOS, BagWriter, open_bag
+from rozyn_estimator.bag import open_bag
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.method.full import FULL_PARAM_NAMES, estimate_full
@@ -193,7 +193,7 @@ def test_a_bag_of_one_imu_topic_replays_with_the_full_car_file(tmp_path):
     path.write_text(dump_full_vehicle(v))
     y = noisy(Simulation(SimConfig(model="full", full_vehicle=v, seed=4, duration_s=125)).run(125).accel_mps2,
               0.05, 4)
-    write_imu_bag(tmp_path / "bag", y)
+    write_imu_bag(tmp_path / "bag", y[:, 0], y[:, 1], y[:, 2])
     with open_bag(tmp_path / "bag") as reader:
         options = ReplayOptions(vehicle=str(path), speed_mps=SPEED_MPS, window_s=120.0)
         config, _ = resolve_config(reader, options)
@@ -205,24 +205,6 @@ def test_a_bag_of_one_imu_topic_replays_with_the_full_car_file(tmp_path):
     last = published[-1].estimate
     truth = np.array([1000.0, 400.0, 2000.0, 1.2, 0.0])
     assert np.all(np.abs(last.params - truth) < 4 * last.std), last.params
-
-
-def write_imu_bag(path, y: np.ndarray) -> None:
-    """A rosbag2 MCAP of one ``sensor_msgs/Imu`` topic at 100 Hz: accel_z, gyro_x, gyro_y columns."""
-    store = get_typestore(Stores.ROS2_JAZZY)
-    t, vec = store.types, store.types["geometry_msgs/msg/Vector3"]
-    with BagWriter(path) as writer:
-        topic = writer.add_topic("/imu/data", "sensor_msgs/msg/Imu", [SENSOR_QOS])
-        for k, (az, gx, gy) in enumerate(y.tolist()):
-            ns = 1_000_000_000 + k * 10_000_000
-            msg = t["sensor_msgs/msg/Imu"](
-                header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](
-                    sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id="imu_link"),
-                orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
-                orientation_covariance=np.array([-1.0, *[0.0] * 8]), angular_velocity=vec(x=gx, y=gy, z=0.0),
-                angular_velocity_covariance=np.zeros(9), linear_acceleration=vec(x=0.0, y=0.0, z=az),
-                linear_acceleration_covariance=np.zeros(9))
-            writer.write(topic, ns, bytes(store.serialize_cdr(msg, "sensor_msgs/msg/Imu")))
 
 
 # --- an IMU mounted turned ------------------------------------------------------------------

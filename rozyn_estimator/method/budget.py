@@ -79,11 +79,15 @@ class Budget:
         return self.statistical + self.systematic
 
     @property
+    def varying_covariance(self) -> np.ndarray:
+        """The calibrated values' part that varies between windows (``varying``'s), (k, k)."""
+        return sum((np.outer(c, c) for c in self.varying.values()), np.zeros(self.statistical.shape))
+
+    @property
     def between_windows(self) -> np.ndarray:
         """How the estimate varies between windows of the same vehicle: the statistical part and
         the calibrated values' varying part."""
-        return self.statistical + sum((np.outer(c, c) for c in self.varying.values()),
-                                      np.zeros(self.statistical.shape))
+        return self.statistical + self.varying_covariance
 
     def by_group(self, i: int) -> list[tuple[str, float]]:
         """(contributor, std) for parameter ``i``, largest first, statistics included."""

@@ -13,6 +13,8 @@ frequency; the stage's band (the body modes) is where it is smallest.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy import signal
 
@@ -44,20 +46,20 @@ def gyro_sign_problem(y: np.ndarray, fs_hz: float, vehicle: Vehicle, speed_mps: 
     is compared with the model's at the vehicle file's values: a flipped axis turns it half round
     (a correlation of about -1, where the right sign gives +1). Fitted anyway, a flipped gyro
     read as a speed 0.4x the topic's and Rozyn's stage as m +12 %, l_f +75 %."""
-    if not vehicle.pitch_gyro or not speed_mps or y.shape[0] < 8 * fs_hz:
+    if not vehicle.pitch_gyro or not speed_mps:
         return None
-    f, cross = signal.csd(y[:, 0], y[:, 1], fs=fs_hz, nperseg=min(y.shape[0], round(16 * fs_hz)))
-    band = (f >= 0.5) & (f <= 4.0)
-    if np.count_nonzero(band) < 8:
+
+    def model_cross(freq_hz: np.ndarray) -> np.ndarray:
+        model = HalfCarSpectrum(vehicle, freq_hz, fs_hz, float(speed_mps), aliases=0)
+        v = vehicle
+        nominal = np.array([v.sprung_mass_kg, v.pitch_inertia_kgm2, v.cog_from_front_axle_m])
+        S, _ = model.spectrum(model.theta(nominal, 1.0, np.full(2, 1e-12)), derivatives=False, smooth=False)
+        return S[:, :1, 1:]
+
+    scores = sign_scores(y, fs_hz, [0], [1], model_cross)
+    if scores is None or scores[0] > SIGN_SCORE:
         return None
-    model = HalfCarSpectrum(vehicle, f[band], fs_hz, float(speed_mps), aliases=0)
-    nominal = np.array([vehicle.sprung_mass_kg, vehicle.pitch_inertia_kgm2, vehicle.cog_from_front_axle_m])
-    S, _ = model.spectrum(model.theta(nominal, 1.0, np.full(2, 1e-12)), derivatives=False, smooth=False)
-    expected = np.conj(S[:, 0, 1])  # scipy's csd(x, y) is E[conj(X) Y]; the model's S01 E[Y0 conj(Y1)]
-    score = float(np.real(np.sum(np.conj(expected) * cross[band])) /
-                  max(np.sum(np.abs(expected) * np.abs(cross[band])), 1e-300))
-    if score > SIGN_SCORE:
-        return None
+    score = float(scores[0])
     label = vehicle.channel_names[1]
     return (f"{label} reads the pitch rate with the sign opposite to REP 103's (angular_velocity.y positive "
             f"when the nose dips; its cross-spectrum with the accelerometer correlates {score:+.2f} with the "
@@ -67,4 +69,23 @@ def gyro_sign_problem(y: np.ndarray, fs_hz: float, vehicle: Vehicle, speed_mps: 
 SIGN_SCORE = -0.5  # the right sign correlates about +1 and noise about 0; a flipped axis about -1
 
 
-__all__ = ["SIGN_SCORE", "gyro_sign_problem", "stage_input", "stage_vehicle"]
+def sign_scores(y: np.ndarray, fs_hz: float, accels: list[int], gyros: list[int],
+                model_cross: Callable[[np.ndarray], np.ndarray]) -> np.ndarray | None:
+    """(gyros,) how each gyro's cross-spectra with the accelerometers over the body modes
+    (0.5-4 Hz) correlate with the model's, ``model_cross(freq_hz)`` (K, accels, gyros) as
+    ``E[Y_a conj(Y_g)]``: about +1 for the right sign, -1 for a flipped axis; None for a window
+    too short to tell (under 8 s, or under 8 frequencies in the band)."""
+    if y.shape[0] < 8 * fs_hz:
+        return None
+    f, cross = signal.csd(y[:, accels, None], y[:, None, gyros], fs=fs_hz, axis=0,
+                          nperseg=min(y.shape[0], round(16 * fs_hz)))
+    band = (f >= 0.5) & (f <= 4.0)
+    if np.count_nonzero(band) < 8:
+        return None
+    expected = np.conj(model_cross(f[band]))  # scipy's csd(x, y) is E[conj(X) Y]
+    got = cross[band]
+    return np.real(np.sum(np.conj(expected) * got, axis=(0, 1))) / \
+        np.maximum(np.sum(np.abs(expected) * np.abs(got), axis=(0, 1)), 1e-300)
+
+
+__all__ = ["SIGN_SCORE", "gyro_sign_problem", "sign_scores", "stage_input", "stage_vehicle"]

@@ -172,10 +172,7 @@ class EstimatorConfig:
             vehicle["tolerances"] = Tolerances.none().to_dict()
         ignored = [] if ignored is None else ignored
         full = data.pop("full_vehicle", None) if isinstance(data, dict) else None
-        sensors = vehicle.pop("sensors", None) if isinstance(vehicle, dict) else None
-        if isinstance(vehicle, dict) and sensors is not None:  # the block places its sensors (an IMU's
-            for key in ("sensor_front_offset_m", "sensor_rear_offset_m"):  # offsets alone are no half car)
-                vehicle.pop(key, None)
+        sensors = _take_block(vehicle, ("sensor_front_offset_m", "sensor_rear_offset_m"))
         config: EstimatorConfig = _from_dict(cls(), data, "estimator configuration", ignored)
         if sensors is not None:
             block = sensors_from_mapping(sensors, "estimator configuration.vehicle")
@@ -183,14 +180,23 @@ class EstimatorConfig:
         if full is None:
             return config
         where = "estimator configuration.full_vehicle"
-        full_block = full.pop("sensors", None) if isinstance(full, dict) else None
-        if full_block is not None:  # the block places its sensors
-            for key in ("sensor_x_m", "sensor_y_m"):
-                full.pop(key, None)
+        full_block = _take_block(full, ("sensor_x_m", "sensor_y_m"))
         full_vehicle = _from_dict(FullVehicle(), full, where, ignored)
         if full_block is not None:
             full_vehicle = full_vehicle.with_sensors(sensors_from_mapping(full_block, where))
         return config.replace(full_vehicle=full_vehicle)
+
+
+def _take_block(vehicle: Any, placed: tuple[str, ...]) -> Any:
+    """A recorded vehicle's ``sensors`` block (None: none), popped from it with the fields the
+    block places (an IMU's positions alone make no vehicle: ``with_sensors`` sets them)."""
+    if not isinstance(vehicle, dict):
+        return None
+    block = vehicle.pop("sensors", None)
+    if block is not None:
+        for key in placed:
+            vehicle.pop(key, None)
+    return block
 
 
 def _from_dict(default: Any, data: Any, where: str, ignored: list[str]) -> Any:

@@ -95,12 +95,6 @@ class LoadChange:
                 f"{self.mass_after_kg:.0f} kg ({p})")
 
 
-def between_windows(est: AnyEstimate, stat: np.ndarray) -> np.ndarray:
-    """How ``est`` varies between windows of the same vehicle: its statistical covariance
-    ``stat`` and the varying part of its calibrated values (:attr:`Budget.between_windows`)."""
-    return stat if est.budget is None else np.asarray(est.budget.between_windows)
-
-
 def statistical_covariance(est: AnyEstimate) -> np.ndarray | None:
     """The estimate's statistical covariance (its budget's, else its whole covariance)."""
     if est.budget is not None:
@@ -214,7 +208,8 @@ class Fusion:
                 continue
             d = est.params - before.mean
             # the calibrated values vary too: this window's afresh, the fused ones' averaged down
-            varying = (between_windows(est, stat) - stat) * (1.0 + 1.0 / before.windows)
+            share = 1.0 + 1.0 / before.windows
+            varying = 0.0 if est.budget is None else est.budget.varying_covariance * share
             try:
                 z2 = float(d @ np.linalg.solve(stat + varying + before.covariance, d))
             except np.linalg.LinAlgError:

@@ -11,11 +11,10 @@ corners'. The stage only starts the likelihood fit, which models each channel ex
 from __future__ import annotations
 
 import numpy as np
-from scipy import signal
 
 from rozyn_estimator.body_model import full_car_channel_rows
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
-from rozyn_estimator.method.imu import SIGN_SCORE
+from rozyn_estimator.method.imu import SIGN_SCORE, sign_scores
 from rozyn_estimator.vehicle_full import FullVehicle
 
 STAGE_CORNERS = (0, 1, 2, 3)
@@ -54,22 +53,19 @@ def gyro_sign_problem(y: np.ndarray, fs_hz: float, vehicle: FullVehicle,
     kinds = vehicle.channel_kinds
     gyros = [i for i, kind in enumerate(kinds) if kind != "accel_z"]
     accels = [i for i, kind in enumerate(kinds) if kind == "accel_z"]
-    if vehicle.sensors is None or not gyros or not speed_mps or y.shape[0] < 8 * fs_hz:
+    if vehicle.sensors is None or not gyros or not speed_mps:
         return None
-    f, cross = signal.csd(y[:, accels, None], y[:, None, gyros], fs=fs_hz, axis=0,
-                          nperseg=min(y.shape[0], round(16 * fs_hz)))
-    band = (f >= 0.5) & (f <= 4.0)
-    if np.count_nonzero(band) < 8:
+
+    def model_cross(freq_hz: np.ndarray) -> np.ndarray:
+        model = FullCarSpectrum(vehicle, range(len(kinds)), freq_hz, fs_hz, float(speed_mps), aliases=0)
+        nominal = np.array([vehicle.sprung_mass_kg, vehicle.roll_inertia_kgm2, vehicle.pitch_inertia_kgm2,
+                            vehicle.cog_from_front_axle_m, vehicle.cog_lateral_m])
+        S, _ = model.spectrum(model.theta(nominal, 1.0, np.full(len(kinds), 1e-12)), derivatives=False)
+        return S[:, accels][:, :, gyros]
+
+    score = sign_scores(y, fs_hz, accels, gyros, model_cross)
+    if score is None:
         return None
-    model = FullCarSpectrum(vehicle, tuple(range(len(kinds))), f[band], fs_hz, float(speed_mps), aliases=0)
-    nominal = np.array([vehicle.sprung_mass_kg, vehicle.roll_inertia_kgm2, vehicle.pitch_inertia_kgm2,
-                        vehicle.cog_from_front_axle_m, vehicle.cog_lateral_m])
-    S, _ = model.spectrum(model.theta(nominal, 1.0, np.full(len(kinds), 1e-12)), derivatives=False)
-    # scipy's csd(x, y) is E[conj(X) Y]; the model's S_ag is E[Y_a conj(Y_g)]
-    expected = np.conj(S[:, accels][:, :, gyros])
-    got = cross[band]
-    score = np.real(np.sum(np.conj(expected) * got, axis=(0, 1))) / \
-        np.maximum(np.sum(np.abs(expected) * np.abs(got), axis=(0, 1)), 1e-300)
     flipped = [(vehicle.channel_names[g], kinds[g], s)
                for g, s in zip(gyros, score, strict=True) if s <= SIGN_SCORE]
     if not flipped:

@@ -25,10 +25,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rozyn_estimator.body_model import GYRO_ROWS
+
 GROUPS = ("gain", "x", "y", "delay", "turn")
 DELAY_SCALE_S = 1e-3  # the delay's parameter is in ms (of the order of the other values' scales)
 _POSITION_ROWS = {"x": np.array([0.0, -1.0, 0.0]), "y": np.array([0.0, 0.0, 1.0])}
-_TURNS = {"gyro_x": ((0.0, 0.0, 1.0), (0.0, -1.0, 0.0)), "gyro_y": ((0.0, -1.0, 0.0), (0.0, 0.0, -1.0))}
+# a gyro's row P and the row T its turn adds: the other gyro's (gyro_y's turned row gains -θ')
+_TURNS = {"gyro_x": (GYRO_ROWS["gyro_x"], GYRO_ROWS["gyro_y"]),
+          "gyro_y": (GYRO_ROWS["gyro_y"], tuple(-x for x in GYRO_ROWS["gyro_x"]))}
 
 
 @dataclass(frozen=True)
