@@ -1,16 +1,27 @@
-"""The vehicle's equations of motion ``M q'' + C q' + K q = Kt u + Ct u'``: the half car (thesis
-chapter 3, eqs 3-4 to 3-9, typos corrected) and the full car (the half car widened to four
-corners with anti-roll bars), with the weight through the geometry where the vehicle gives its
-heights (:mod:`rozyn_estimator.gravity`).
+"""The vehicle's equations of motion ``M q'' + C q' + K q = Kt u + Ct u'``: one rigid body on a
+list of corners, each a suspension (spring, damper) above a wheel above a tyre, with anti-roll
+bars between corners, and the weight through the geometry where the vehicle gives its heights
+(:mod:`rozyn_estimator.gravity`).
 
-The simulator's plants (:mod:`sim_node.halfcar`, :mod:`sim_node.fullcar`) run these matrices, and
-the estimator uses them for what it must predict in the time domain (the body's response to the
-load transfer of accelerating and braking, :mod:`rozyn_estimator.method.load_transfer`), so the
-plant and the observer share the vehicle as they share its parameters.
+The half car (thesis chapter 3, eqs 3-4 to 3-9, typos corrected) is its two-corner case on the
+centreline: the body heaves and pitches. The full car is its four-corner case: the body heaves,
+pitches and rolls. ``q`` holds the wheels' heave (the vehicle's corner order: front, rear; or FL,
+FR, RL, RR), then the body's heave at its centre of gravity, its pitch (positive nose up) and,
+where it rolls, its roll (positive left side up). A body point at ``(x, y)`` (behind the front
+axle, left of the centreline) moves ``x_s + (lf - x) phi + (y - y_cog) theta`` (eqs 3-8, 3-9
+widened). With ``G`` the map from ``q`` to the corners' extensions ``e = z(corner) - x_t``::
 
-Half car: ``q = [x_tf, x_tr, x_s, phi]`` (wheels, body heave at the CoG, pitch positive nose up).
-Full car: ``q = [x_t,FL, x_t,FR, x_t,RL, x_t,RR, x_s, phi, theta]`` (roll positive left side up);
-a body point at ``(x, y)`` moves ``x_s + (lf - x) phi + (y - y_cog) theta``.
+    M = diag(m_t, m_s, I_yy[, I_xx])                               (eq 3-4)
+    K = diag(k_t, 0…) + G^T (diag(k_s) + B) G                      (eq 3-5)
+    C = diag(c_t, 0…) + G^T diag(c_s) G                            (eq 3-6)
+
+with ``B`` the bars' springs between their corners' extensions (a bar of roll stiffness ``K``
+[N m/rad] across a track ``t`` is ``K / t²`` N/m).
+
+The simulator's plant (:mod:`sim_node.plant`) runs these matrices, and the estimator uses them
+for what it must predict in the time domain (the body's response to the load transfer of
+accelerating and braking, :mod:`rozyn_estimator.method.load_transfer`), so the plant and the
+observer share the vehicle as they share its parameters.
 """
 
 from __future__ import annotations
@@ -24,11 +35,11 @@ from rozyn_estimator.gravity import gravity_height_m, rotation_inertia_kgm2, rot
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import FullVehicle
 
-HALF_DOF = 4
-HALF_PITCH = 3
-FULL_DOF = 7
-FULL_CORNERS = 4
-FULL_HEAVE, FULL_PITCH, FULL_ROLL = 4, 5, 6  # the body's coordinates in the full car's q
+AnyVehicle = Vehicle | FullVehicle
+
+GYRO_ROWS = {"gyro_x": (0.0, 0.0, 1.0), "gyro_y": (0.0, -1.0, 0.0)}
+"""A gyro's row on the body's ``(z₀, φ, θ)`` rates (:func:`channel_rows`): ``gyro_x`` (REP 103:
+left side up) ``θ'``, ``gyro_y`` (nose down; ``φ`` is nose up) ``-φ'``."""
 
 
 @dataclass(frozen=True)
@@ -46,158 +57,168 @@ class SecondOrderModel:
         return int(self.mass.shape[0])
 
 
-def half_car_model(v: Vehicle) -> SecondOrderModel:
-    """Mass, damping and stiffness matrices of eqs 3-4 to 3-7 (typos corrected), with the weight
-    through the geometry on pitch where the vehicle gives its heights (:mod:`rozyn_estimator.gravity`)."""
-    lf, lr = v.cog_from_front_axle_m, v.cog_from_rear_axle_m
+@dataclass(frozen=True)
+class Corners:
+    """A vehicle as its equations see it: the corners under its body, in the vehicle's order."""
 
-    def suspension_matrix(kf: float, kr: float, tf: float, tr: float) -> np.ndarray:
-        # Same pattern for stiffness (eq 3-5) and damping (eq 3-6): suspension element
-        # between wheel and body point, tyre element between road and wheel.
-        return np.array(
-            [
-                [tf + kf, 0.0, -kf, -lf * kf],
-                [0.0, tr + kr, -kr, lr * kr],
-                [-kf, -kr, kf + kr, lf * kf - lr * kr],
-                [-lf * kf, lr * kr, lf * kf - lr * kr, lf**2 * kf + lr**2 * kr],
-            ]
-        )
+    x_m: np.ndarray  # (n,) behind the front axle
+    y_m: np.ndarray  # (n,) left of the centreline
+    unsprung_mass_kg: np.ndarray  # (n,)
+    suspension_stiffness_npm: np.ndarray  # (n,)
+    suspension_damping_nspm: np.ndarray  # (n,)
+    tyre_stiffness_npm: np.ndarray  # (n,)
+    tyre_damping_nspm: np.ndarray  # (n,)
+    bars_npm: np.ndarray  # (n, n) springs between the corners' extensions (anti-roll bars)
 
-    stiffness = suspension_matrix(
-        v.suspension_stiffness_front_npm,
-        v.suspension_stiffness_rear_npm,
-        v.tyre_stiffness_front_npm,
-        v.tyre_stiffness_rear_npm,
-    )
-    damping = suspension_matrix(
-        v.suspension_damping_front_nspm,
-        v.suspension_damping_rear_nspm,
-        v.tyre_damping_front_nspm,
-        v.tyre_damping_rear_nspm,
-    )
-    mass = np.diag(
-        [v.unsprung_mass_front_kg, v.unsprung_mass_rear_kg, v.sprung_mass_kg, v.pitch_inertia_kgm2]
-    )
-    h = gravity_height_m(v)  # the weight through the geometry (0 where the heights are not given)
-    stiffness[3, 3] += rotation_stiffness_nmprad(v.sprung_mass_kg, h)
-    unsprung_kg = v.unsprung_mass_front_kg + v.unsprung_mass_rear_kg
-    mass[3, 3] += rotation_inertia_kgm2(v.sprung_mass_kg, h, unsprung_kg)[0]
-    tyre_k = np.zeros((HALF_DOF, 2))
-    tyre_k[0, 0], tyre_k[1, 1] = v.tyre_stiffness_front_npm, v.tyre_stiffness_rear_npm
-    tyre_c = np.zeros((HALF_DOF, 2))
-    tyre_c[0, 0], tyre_c[1, 1] = v.tyre_damping_front_nspm, v.tyre_damping_rear_nspm
-    return SecondOrderModel(mass, damping, stiffness, tyre_k, tyre_c)
+    @property
+    def count(self) -> int:
+        return int(self.x_m.size)
 
 
-def half_car_sensor_rows(v: Vehicle) -> np.ndarray:
-    """(2, 4) map from ``q`` to what the two channels read: an accelerometer the body's vertical
-    motion at its position, a pitch gyro (``gyro_y``, REP 103: positive nose down) ``-phi``; the
-    gyro reads the rate of its row, an accelerometer the acceleration (:func:`half_car_sensor_rates`)."""
-    lf = v.cog_from_front_axle_m
-    rows = np.zeros((2, HALF_DOF))
-    for i, x in enumerate(v.sensor_x_m):
-        rows[i, 2] = 1.0
-        rows[i, 3] = lf - x
-    if v.pitch_gyro:
-        rows[1] = 0.0
-        rows[1, HALF_PITCH] = -1.0
-    return rows
+def corners_of(v: AnyVehicle) -> Corners:
+    """The vehicle's corners: the half car's front and rear axle on the centreline, the full car's four."""
+    if isinstance(v, FullVehicle):
+        bars = np.zeros((4, 4))
+        for rows, bar_nmprad, track in ((slice(0, 2), v.anti_roll_stiffness_front_nmprad, v.track_front_m),
+                                        (slice(2, 4), v.anti_roll_stiffness_rear_nmprad, v.track_rear_m)):
+            bars[rows, rows] = bar_nmprad / track**2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
+        return Corners(np.array(v.corner_x_m), np.array(v.corner_y_m), np.array(v.unsprung_mass_kg),
+                       np.array(v.suspension_stiffness_npm), np.array(v.suspension_damping_nspm),
+                       np.array(v.tyre_stiffness_npm), np.array(v.tyre_damping_nspm), bars)
+    return Corners(np.array([0.0, v.wheelbase_m]), np.zeros(2),
+                   np.array([v.unsprung_mass_front_kg, v.unsprung_mass_rear_kg]),
+                   np.array([v.suspension_stiffness_front_npm, v.suspension_stiffness_rear_npm]),
+                   np.array([v.suspension_damping_front_nspm, v.suspension_damping_rear_nspm]),
+                   np.array([v.tyre_stiffness_front_npm, v.tyre_stiffness_rear_npm]),
+                   np.array([v.tyre_damping_front_nspm, v.tyre_damping_rear_nspm]), np.zeros((2, 2)))
 
 
-def half_car_sensor_rates(v: Vehicle) -> np.ndarray:
-    """(2,) bool: the channel reads its row's rate (a gyro), not its acceleration."""
-    return np.array([False, v.pitch_gyro])
+def rolls(v: AnyVehicle) -> bool:
+    """Whether the body rolls in the vehicle's model (the full car)."""
+    return isinstance(v, FullVehicle)
 
 
-def half_car_suspension_rows(v: Vehicle) -> np.ndarray:
-    """(2, 4) map ``G`` from ``q`` to the corners' extensions ``e = x_s,axle - x_t`` (eqs 3-8,
-    3-9): the suspension part of eq 3-5 is ``G^T diag(k_s) G``, of eq 3-6 ``G^T diag(c_s) G``."""
-    lf, lr = v.cog_from_front_axle_m, v.cog_from_rear_axle_m
-    return np.array([[-1.0, 0.0, 1.0, lf], [0.0, -1.0, 1.0, -lr]])
+def body_inertias(v: AnyVehicle) -> np.ndarray:
+    """The body's (m, I_yy[, I_xx]) [kg, kg m²], in ``q``'s order."""
+    if isinstance(v, FullVehicle):
+        return np.array([v.sprung_mass_kg, v.pitch_inertia_kgm2, v.roll_inertia_kgm2])
+    return np.array([v.sprung_mass_kg, v.pitch_inertia_kgm2])
 
 
-def full_car_suspension_rows(v: FullVehicle) -> np.ndarray:
-    """(4, 7) map ``G`` from ``q`` to the corners' extensions ``e = z(corner) - x_t`` (FL, FR, RL, RR)."""
-    g = np.zeros((FULL_CORNERS, FULL_DOF))
-    g[:, :FULL_CORNERS] = -np.eye(FULL_CORNERS)
-    g[:, FULL_HEAVE:] = full_car_body_rows(v, np.column_stack([v.corner_x_m, v.corner_y_m]))[:, FULL_HEAVE:]
-    return g
+def corner_count(v: AnyVehicle) -> int:
+    """How many corners (wheels, tyres) the vehicle stands on."""
+    return 4 if isinstance(v, FullVehicle) else 2
 
 
-def full_car_body_rows(v: FullVehicle, points_m: np.ndarray) -> np.ndarray:
-    """(k, 7) map from ``q`` to the body's vertical motion at points ``(x, y)`` (k, 2) [m]:
-    ``x_s + (lf - x) phi + (y - y_cog) theta``."""
+def heave_index(v: AnyVehicle) -> int:
+    """The body's heave in ``q``; its pitch follows, then its roll (where it rolls)."""
+    return corner_count(v)
+
+
+def pitch_index(v: AnyVehicle) -> int:
+    """The body's pitch (positive nose up) in ``q``."""
+    return heave_index(v) + 1
+
+
+def dof(v: AnyVehicle) -> int:
+    """The length of ``q``: the wheels and the body's two or three coordinates."""
+    return corner_count(v) + body_inertias(v).size
+
+
+def body_rows(v: AnyVehicle, points_m: np.ndarray) -> np.ndarray:
+    """(k, dof) map from ``q`` to the body's vertical motion at points ``(x, y)`` (k, 2) [m]:
+    ``x_s + (lf - x) phi + (y - y_cog) theta`` (a body that does not roll: ``y`` must be 0)."""
     p = np.atleast_2d(np.asarray(points_m, dtype=float))
     if p.ndim != 2 or p.shape[1] != 2:
         raise ValueError(f"points_m must have shape (k, 2) of (x, y), got {np.shape(points_m)}")
-    rows = np.zeros((p.shape[0], FULL_DOF))
-    rows[:, FULL_HEAVE] = 1.0
-    rows[:, FULL_PITCH] = v.cog_from_front_axle_m - p[:, 0]
-    rows[:, FULL_ROLL] = p[:, 1] - v.cog_lateral_m
+    if not rolls(v) and np.any(p[:, 1] != 0.0):
+        raise ValueError("a body that does not roll (the half car) has its points on the centreline: y = 0")
+    rows = np.zeros((p.shape[0], dof(v)))
+    heave = heave_index(v)
+    rows[:, heave] = 1.0
+    rows[:, heave + 1] = v.cog_from_front_axle_m - p[:, 0]
+    if rolls(v):
+        rows[:, heave + 2] = p[:, 1] - _cog_lateral_m(v)
     return rows
 
 
-def full_car_sensor_points(v: FullVehicle) -> np.ndarray:
-    """(4, 2) the accelerometers' ``(x, y)`` (FL, FR, RL, RR) [m]."""
-    return np.column_stack([v.sensor_x_m, v.sensor_y_m])
+def suspension_rows(v: AnyVehicle) -> np.ndarray:
+    """(corners, dof) map ``G`` from ``q`` to the corners' extensions ``e = z(corner) - x_t``
+    (eqs 3-8, 3-9): the suspension part of eq 3-5 is ``G^T diag(k_s) G``, of eq 3-6 ``G^T diag(c_s) G``."""
+    c = corners_of(v)
+    g = body_rows(v, np.column_stack([c.x_m, c.y_m]))
+    g[:, : c.count] = -np.eye(c.count)
+    return g
 
 
-GYRO_ROWS = {"gyro_x": (0.0, 0.0, 1.0), "gyro_y": (0.0, -1.0, 0.0)}
-"""A gyro's row on the body's ``(z₀, φ, θ)`` rates (:func:`full_car_channel_rows`): ``gyro_x``
-(REP 103: left side up) ``θ'``, ``gyro_y`` (nose down; ``φ`` is nose up) ``-φ'``."""
+def second_order_model(v: AnyVehicle) -> SecondOrderModel:
+    """Mass, damping and stiffness matrices (eqs 3-4 to 3-7 on the vehicle's corners; see the
+    module's docstring), the road under each tyre as the inputs."""
+    c = corners_of(v)
+    g = suspension_rows(v)
 
-
-def full_car_channel_rows(vehicle: FullVehicle, sensors: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
-    """((k, 3) each channel's row on the body's ``(z₀, φ, θ)`` (``z₀`` at the front axle's centre:
-    :mod:`rozyn_estimator.method.full.spectrum`), (k,) bool: the channel reads the rate, a gyro).
-    An accelerometer at ``(x, y)`` reads ``(1, -x, y)``, a gyro its :data:`GYRO_ROWS` row."""
-    kinds = [vehicle.channel_kinds[c] for c in sensors]
-    xs, ys = np.asarray(vehicle.sensor_x_m)[list(sensors)], np.asarray(vehicle.sensor_y_m)[list(sensors)]
-    rows = np.array([GYRO_ROWS.get(kind, (1.0, -x, y)) for kind, x, y in zip(kinds, xs, ys, strict=True)])
-    return rows.reshape(len(kinds), 3), np.array([kind in GYRO_ROWS for kind in kinds])
-
-
-def full_car_sensor_rows(v: FullVehicle) -> np.ndarray:
-    """(k, 7) map from ``q`` to what the channels read (:func:`full_car_channel_rows` in ``q``'s
-    coordinates: ``z₀ = x_s + lf phi - y_cog theta``); a gyro reads its row's rate
-    (:func:`full_car_sensor_rates`)."""
-    body, _ = full_car_channel_rows(v, range(len(v.channel_kinds)))
-    rows = np.zeros((body.shape[0], FULL_DOF))
-    rows[:, FULL_HEAVE] = body[:, 0]
-    rows[:, FULL_PITCH] = v.cog_from_front_axle_m * body[:, 0] + body[:, 1]
-    rows[:, FULL_ROLL] = body[:, 2] - v.cog_lateral_m * body[:, 0]
-    return rows
-
-
-def full_car_sensor_rates(v: FullVehicle) -> np.ndarray:
-    """(k,) bool: the channel reads its row's rate (a gyro), not its acceleration."""
-    return full_car_channel_rows(v, range(len(v.channel_kinds)))[1]
-
-
-def full_car_model(v: FullVehicle) -> SecondOrderModel:
-    """Mass, damping and stiffness matrices (see the module's docstring), tyres as inputs."""
-    g = full_car_suspension_rows(v)
-    bars = np.zeros((FULL_CORNERS, FULL_CORNERS))  # the bars' springs between the corners' extensions
-    for rows, bar_nmprad, track in ((slice(0, 2), v.anti_roll_stiffness_front_nmprad, v.track_front_m),
-                                    (slice(2, 4), v.anti_roll_stiffness_rear_nmprad, v.track_rear_m)):
-        bars[rows, rows] = bar_nmprad / track**2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
-
-    def corners(suspension: tuple[float, ...], tyre: tuple[float, ...], extra: np.ndarray) -> np.ndarray:
-        out = g.T @ (np.diag(suspension) + extra) @ g
-        out[:FULL_CORNERS, :FULL_CORNERS] += np.diag(tyre)
+    def on_corners(suspension: np.ndarray, tyre: np.ndarray, between: np.ndarray) -> np.ndarray:
+        # the same pattern for stiffness (eq 3-5) and damping (eq 3-6): suspension elements between
+        # wheel and body point, tyre elements between road and wheel
+        out = g.T @ (np.diag(suspension) + between) @ g
+        out[: c.count, : c.count] += np.diag(tyre)
         return out
 
-    stiffness = corners(v.suspension_stiffness_npm, v.tyre_stiffness_npm, bars)
-    damping = corners(v.suspension_damping_nspm, v.tyre_damping_nspm, np.zeros((FULL_CORNERS, FULL_CORNERS)))
-    mass = np.diag([*v.unsprung_mass_kg, v.sprung_mass_kg, v.pitch_inertia_kgm2, v.roll_inertia_kgm2])
-    h = gravity_height_m(v)  # the weight through the geometry, in pitch and in roll alike
-    for k in (FULL_PITCH, FULL_ROLL):
+    stiffness = on_corners(c.suspension_stiffness_npm, c.tyre_stiffness_npm, c.bars_npm)
+    damping = on_corners(c.suspension_damping_nspm, c.tyre_damping_nspm, np.zeros_like(c.bars_npm))
+    mass = np.diag(np.concatenate([c.unsprung_mass_kg, body_inertias(v)]))
+    h = gravity_height_m(v)  # the weight through the geometry (0 where the heights are not given)
+    for k in range(heave_index(v) + 1, dof(v)):  # pitch and roll alike
         stiffness[k, k] += rotation_stiffness_nmprad(v.sprung_mass_kg, h)
-        mass[k, k] += rotation_inertia_kgm2(v.sprung_mass_kg, h, sum(v.unsprung_mass_kg))[0]
-    tyre_k = np.zeros((FULL_DOF, FULL_CORNERS))
-    tyre_k[:FULL_CORNERS] = np.diag(v.tyre_stiffness_npm)
-    tyre_c = np.zeros((FULL_DOF, FULL_CORNERS))
-    tyre_c[:FULL_CORNERS] = np.diag(v.tyre_damping_nspm)
+        mass[k, k] += rotation_inertia_kgm2(v.sprung_mass_kg, h, float(c.unsprung_mass_kg.sum()))[0]
+    tyre_k = np.zeros((dof(v), c.count))
+    tyre_k[: c.count] = np.diag(c.tyre_stiffness_npm)
+    tyre_c = np.zeros((dof(v), c.count))
+    tyre_c[: c.count] = np.diag(c.tyre_damping_nspm)
     return SecondOrderModel(mass, damping, stiffness, tyre_k, tyre_c)
 
 
+def channel_rows(v: AnyVehicle, sensors: Sequence[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """((k, b) each channel's row on the body's ``(z₀, φ[, θ])`` (``z₀`` at the front axle's
+    centre: :mod:`rozyn_estimator.method.full.spectrum`), (k,) bool: the channel reads the rate,
+    a gyro) for the channels ``sensors`` (default all). An accelerometer at ``(x, y)`` reads
+    ``(1, -x, y)``, a gyro its :data:`GYRO_ROWS` row."""
+    index = list(range(len(v.channel_kinds)) if sensors is None else sensors)
+    kinds = [v.channel_kinds[c] for c in index]
+    xs, ys = np.asarray(v.sensor_x_m)[index], np.asarray(v.sensor_y_m)[index]
+    rows = np.array([GYRO_ROWS.get(kind, (1.0, -x, y)) for kind, x, y in zip(kinds, xs, ys, strict=True)])
+    b = 3 if rolls(v) else 2
+    return rows.reshape(len(kinds), 3)[:, :b], np.array([kind in GYRO_ROWS for kind in kinds])
+
+
+def sensor_rows(v: AnyVehicle) -> np.ndarray:
+    """(k, dof) map from ``q`` to what the channels read (:func:`channel_rows` in ``q``'s
+    coordinates: ``z₀ = x_s + lf phi - y_cog theta``); a gyro reads its row's rate
+    (:func:`sensor_rates`), an accelerometer the acceleration."""
+    body, _ = channel_rows(v)
+    rows = np.zeros((body.shape[0], dof(v)))
+    heave = heave_index(v)
+    rows[:, heave] = body[:, 0]
+    rows[:, heave + 1] = v.cog_from_front_axle_m * body[:, 0] + body[:, 1]
+    if rolls(v):
+        rows[:, heave + 2] = body[:, 2] - _cog_lateral_m(v) * body[:, 0]
+    return rows
+
+
+def sensor_rates(v: AnyVehicle) -> np.ndarray:
+    """(k,) bool: the channel reads its row's rate (a gyro), not its acceleration."""
+    return channel_rows(v)[1]
+
+
+def sensor_points(v: AnyVehicle) -> np.ndarray:
+    """(k, 2) the channels' ``(x, y)`` [m] (a gyro's position is where its sensor sits)."""
+    return np.column_stack([v.sensor_x_m, v.sensor_y_m])
+
+
+def _cog_lateral_m(v: AnyVehicle) -> float:
+    return float(v.cog_lateral_m) if isinstance(v, FullVehicle) else 0.0
+
+
+__all__ = ["GYRO_ROWS", "AnyVehicle", "Corners", "SecondOrderModel", "body_inertias", "body_rows",
+           "channel_rows", "corner_count", "corners_of", "dof", "heave_index", "pitch_index", "rolls",
+           "second_order_model", "sensor_points", "sensor_rates", "sensor_rows", "suspension_rows"]

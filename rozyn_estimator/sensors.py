@@ -16,7 +16,7 @@ the nose dips), ``gyro_x`` (``angular_velocity.x``, the roll rate, positive when
 rises). Without the block a half car has today's two accelerometers (``front_topic`` at
 ``sensor_front_offset_m``, ``rear_topic`` at ``sensor_rear_offset_m``), which is the block's
 preset. This module holds the data and checks what the half car can use; the model reads the
-channels through :func:`rozyn_estimator.body_model.half_car_sensor_rows`.
+channels through :func:`rozyn_estimator.body_model.sensor_rows`.
 """
 
 from __future__ import annotations

@@ -114,6 +114,16 @@ class Vehicle:
         return first.label, second.label
 
     @property
+    def sensor_y_m(self) -> tuple[float, float]:
+        """The half car's sensors sit on its centreline: ``y = 0`` [m]."""
+        return (0.0, 0.0)
+
+    @property
+    def channel_kinds(self) -> tuple[str, str]:
+        """Each channel's kind: ``accel_z``, and ``accel_z`` or a pitch gyro's ``gyro_y``."""
+        return ("accel_z", "gyro_y" if self.pitch_gyro else "accel_z")
+
+    @property
     def pitch_gyro(self) -> bool:
         """The second channel is a pitch gyro (``gyro_y``), not an accelerometer (a valid block with
         a gyro_y has it there: :func:`~rozyn_estimator.sensors.half_car_channels`)."""

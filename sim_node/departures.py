@@ -29,7 +29,7 @@ Sensors (each accelerometer sample is the body's vertical specific force at its 
   the specific force, gravity included (then its bias and noise are added);
 - a time offset of the rear sensor behind the front one: the rear sample stamped ``t``
   holds the specific force at ``t - time_offset_s`` (negative: the front sample stamped
-  ``t`` holds it at ``t + time_offset_s``), exactly (:class:`sim_node.halfcar.HalfCarPlant`);
+  ``t`` holds it at ``t + time_offset_s``), exactly (:class:`sim_node.vehicle_plant.VehiclePlant`);
 - an IMU low-pass, the same in both sensors: a causal 2nd-order Butterworth at
   ``lowpass_hz``, run at the plant's internal rate before sampling
   (:mod:`sim_node.sensors`).

@@ -1,6 +1,6 @@
 """Fixed points ``x = g(x)`` of array maps by Anderson-accelerated iteration.
 
-The nonlinear suspension (:mod:`sim_node.halfcar`) solves a block's extra tensions this
+The nonlinear suspension (:mod:`sim_node.vehicle_plant`) solves a block's extra tensions this
 way, each evaluation of ``g`` one vectorised linear run of the half car. Plain iteration
 ``x <- g(x)`` converges when ``g`` contracts (asymmetric dampers: by at most
 ``(ratio - 1)/(ratio + 1)`` per step); Anderson's acceleration (Walker & Ni 2011, "type

@@ -1,6 +1,6 @@
 """Linear vehicle models ``M q'' + C q' + K q = Kt u + Ct u'`` and their exact, streaming discretisation.
 
-Shared by the half car (:mod:`sim_node.halfcar`) and the full car (:mod:`sim_node.fullcar`).
+Run for every vehicle by :mod:`sim_node.vehicle_plant`.
 
 The road enters through the tyres as displacement (tyre stiffness) and velocity (tyre
 damping). The road displacement is taken piecewise linear between simulation steps

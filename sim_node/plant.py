@@ -1,9 +1,9 @@
 """A linear vehicle model run block by block, with the simulator's departures from it.
 
-Shared by the half car (:mod:`sim_node.halfcar`) and the full car (:mod:`sim_node.fullcar`):
-both are ``M q'' + C q' + K q = Kt u + Ct u'`` (:mod:`sim_node.modal`) with corners whose
-suspension acts along rows ``G`` of ``q`` (the extensions ``e = G q``), outputs that read the
-body's acceleration at the sensors, and the departures of :mod:`sim_node.departures`:
+Run for every vehicle (:mod:`sim_node.vehicle_plant`): each is ``M q'' + C q' + K q = Kt u + Ct u'``
+(:mod:`sim_node.modal`) with corners whose suspension acts along rows ``G`` of ``q`` (the
+extensions ``e = G q``), outputs that read the body's acceleration at the sensors, and the
+departures of :mod:`sim_node.departures`:
 
 - A nonlinear suspension: each corner's tension is the linear ``k e + c v`` plus an extra
   ``f(e, v)``, one more input per corner in the same exact discretisation, piecewise linear

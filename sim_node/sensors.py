@@ -14,7 +14,7 @@ body at the sensor, through the sensor's departures (:mod:`sim_node.departures`)
 4. the sensor's bias (then the simulation adds its white noise).
 
 The time offset between the sensors is the plant's (a delayed output,
-:class:`sim_node.halfcar.HalfCarPlant`), exact at any offset.
+:class:`sim_node.vehicle_plant.VehiclePlant`), exact at any offset.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ from the estimator's model (:mod:`sim_node.departures`); by default they do not.
 speed varies and the vehicle gives its CoG's height, accelerating and braking pitch the body
 (:mod:`sim_node.load_transfer`).
 
-``SimConfig.model = "full"`` runs the 7-DOF full car (:mod:`sim_node.fullcar`) of
+``SimConfig.model = "full"`` runs the 7-DOF full car (:mod:`sim_node.vehicle_plant`) of
 ``full_vehicle`` over two road tracks (:mod:`sim_node.tracks`, coherence
 ``track_coherence``): the blocks then carry four accelerometer channels in the order FL,
 FR, RL, RR (``SimBlock.channels``) at the vehicle's ``sensor_x_m``/``sensor_y_m``, and the
@@ -21,23 +21,29 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import ClassVar, cast
+from typing import ClassVar
 
 import numpy as np
 
+from rozyn_estimator.body_model import (
+    pitch_index,
+    second_order_model,
+    sensor_rates,
+    sensor_rows,
+    suspension_rows,
+)
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.parameters import check, param
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import MODELS, FullVehicle
-from sim_node import fullcar, halfcar
 from sim_node.departures import Departures
 from sim_node.drive_cycle import DriveCycle, load_drive_cycle
-from sim_node.halfcar import N_DOF, N_STATE, HalfCarPlant, static_state
 from sim_node.load_change import STANDING_MPS, with_point_load
 from sim_node.load_transfer import LoadTransfer
 from sim_node.road import Road, RoadSpec
 from sim_node.sensors import GRAVITY_MPS2, Accelerometers
 from sim_node.tracks import COHERENCES, RoadTracks
+from sim_node.vehicle_plant import VehiclePlant, n_state, static_state
 
 # Thesis' free-decay start (main listing): wheels -0.015 m, body -0.03 m, no pitch.
 THESIS_FREE_DECAY_STATE = (-0.015, -0.015, -0.03, 0.0, 0.0, 0.0, 0.0, 0.0)
@@ -105,7 +111,7 @@ class SimConfig:
             ("speed_variation", lambda c: c.speed_variation == 0.0 or not c.drive_cycle_file,
              "a drive cycle sets the speed: speed_variation must be 0 with drive_cycle_file"),
             ("initial_state", lambda c: c.initial_state is None or len(c.initial_state) == c.n_state,
-             f"expected {N_STATE} numbers ({fullcar.N_STATE} with model full)"),
+             f"expected {n_state(Vehicle())} numbers ({n_state(FullVehicle())} with model full)"),
             ("departures", lambda c: c.departures.lowpass_hz < 0.5 * c.rate_hz * c.oversample,
              "lowpass_hz must stay below the plant's Nyquist frequency, rate_hz * oversample / 2"),
             ("full_vehicle", lambda c: c.full_vehicle is None or (c.model == "full" and isinstance(
@@ -160,21 +166,17 @@ class SimConfig:
     def channels(self) -> tuple[str, ...]:
         """The channels, in the order of a block's columns: the accelerometers, or a sensors
         block's channels (``imu.accel_z``, ``imu.gyro_y``)."""
-        if self.model == "full":
-            return cast(FullVehicle, self.plant_vehicle).channel_names
-        return HALF_CHANNELS if self.vehicle.sensors is None else self.vehicle.channel_names
+        return self.plant_vehicle.channel_names
 
     @property
     def gyros(self) -> np.ndarray:
         """(channels,) bool: which channels are gyros."""
-        if self.model == "full":
-            return fullcar.sensor_rates(cast(FullVehicle, self.plant_vehicle))
-        return halfcar.sensor_rates(self.vehicle)
+        return sensor_rates(self.plant_vehicle)
 
     @property
     def n_state(self) -> int:
         """Length of the plant's physical state ``[q, q']``."""
-        return fullcar.N_STATE if self.model == "full" else N_STATE
+        return n_state(self.plant_vehicle)
 
     @property
     def oversample(self) -> int:
@@ -250,15 +252,9 @@ class Simulation:
     def _build_plants(self, vehicle: Vehicle | FullVehicle, x0: np.ndarray, u0: np.ndarray) -> None:
         """The plant of ``vehicle`` from state ``x0`` on the road ``u0``, and its load transfer."""
         cfg = self.config
-        self.plant: HalfCarPlant | fullcar.FullCarPlant
-        if isinstance(vehicle, FullVehicle):
-            self.plant = fullcar.FullCarPlant(vehicle, self._dt, x0=x0, u0=u0,
-                                              suspension=cfg.departures.suspension(vehicle),
-                                              delays_s=cfg.departures.corner_delays_s[: len(cfg.channels)])
-        else:  # a load change keeps the sensors: the loaded vehicle is built on the configured one
-            self.plant = HalfCarPlant(vehicle, self._dt, x0=x0, u0=u0,
-                                      suspension=cfg.departures.suspension(vehicle),
-                                      delays_s=cfg.departures.delays_s)
+        # a load change keeps the sensors: the loaded vehicle is built on the configured one
+        self.plant = VehiclePlant(vehicle, self._dt, x0=x0, u0=u0,
+                                  suspension=cfg.departures.suspension(vehicle), delays_s=self._delays_s())
         self._transfer = self._load_transfer(vehicle)
 
     def _change_load(self) -> None:
@@ -266,8 +262,7 @@ class Simulation:
         cfg = self.config
         self.truth = with_point_load(self.truth, cfg.load_change_kg, cfg.load_change_x_m)
         u0 = self._road_at(np.array([self._step]))[0]
-        rest = fullcar.static_state(self.truth, u0) if isinstance(self.truth, FullVehicle) else \
-            static_state(self.truth, u0)
+        rest = static_state(self.truth, u0)
         self._build_plants(self.truth, rest, u0)
 
     def _load_transfer(self, vehicle: Vehicle | FullVehicle) -> LoadTransfer | None:
@@ -277,16 +272,16 @@ class Simulation:
         if vehicle.cog_height_m <= 0.0 or (cfg.drive_cycle is None and cfg.speed_variation == 0.0):
             return None
         accel0 = float(self.acceleration_at(np.array(self._step * self._dt)))
-        if isinstance(vehicle, FullVehicle):
-            model, rows, pitch = fullcar.second_order_model(vehicle), fullcar.sensor_rows(vehicle), \
-                fullcar.PITCH
-            corners = fullcar.suspension_rows(vehicle)
-            delays = cfg.departures.corner_delays_s[: rows.shape[0]]
-        else:
-            model, rows, pitch = halfcar.second_order_model(vehicle), halfcar.sensor_rows(vehicle), 3
-            corners, delays = halfcar.suspension_rows(vehicle), cfg.departures.delays_s
-        return LoadTransfer(model, rows, corners, pitch, vehicle.sprung_mass_kg, vehicle.cog_height_m,
-                            self._dt, accel0, delays, rates=cfg.gyros)
+        return LoadTransfer(second_order_model(vehicle), sensor_rows(vehicle), suspension_rows(vehicle),
+                            pitch_index(vehicle), vehicle.sprung_mass_kg, vehicle.cog_height_m, self._dt,
+                            accel0, self._delays_s(), rates=cfg.gyros)
+
+    def _delays_s(self) -> tuple[float, ...]:
+        """Each channel's delay behind its step [s] (the departures')."""
+        cfg = self.config
+        if cfg.model == "full":
+            return tuple(cfg.departures.corner_delays_s[: len(cfg.channels)])
+        return tuple(cfg.departures.delays_s)
 
     def _initial_state(self, u0: np.ndarray) -> np.ndarray:
         """The plant's start: ``initial_state``, the thesis' free decay on a flat road, else at rest."""
@@ -296,8 +291,6 @@ class Simulation:
             return np.asarray(cfg.initial_state, dtype=float)
         if cfg.road.kind == "flat":
             return np.asarray(FULL_FREE_DECAY_STATE if cfg.model == "full" else THESIS_FREE_DECAY_STATE)
-        if isinstance(vehicle, FullVehicle):
-            return fullcar.static_state(vehicle, u0)
         return static_state(vehicle, u0)
 
     @property
@@ -382,4 +375,4 @@ class Simulation:
         return self.next_block(round(duration_s * self.config.rate_hz))
 
 
-__all__ = ["GRAVITY_MPS2", "N_DOF", "SimBlock", "SimConfig", "Simulation"]
+__all__ = ["GRAVITY_MPS2", "SimBlock", "SimConfig", "Simulation"]

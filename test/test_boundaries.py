@@ -32,9 +32,9 @@ RULES: dict[str, tuple[set[str], bool]] = {
     f"{PKG}.tools": ({PKG, "sim_node"}, True),
     "sim_node": (SHARED | {f"{PKG}.ros.glue"}, True),
 }
-ROS_FREE_SIM = {"sim_node.halfcar", "sim_node.road", "sim_node.simulation", "sim_node.departures",
+ROS_FREE_SIM = {"sim_node.vehicle_plant", "sim_node.road", "sim_node.simulation", "sim_node.departures",
                 "sim_node.sensors", "sim_node.fixed_point", "sim_node.modal",
-                "sim_node.fullcar", "sim_node.tracks", "sim_node.load_transfer", "sim_node.drive_cycle"}
+                "sim_node.plant", "sim_node.tracks", "sim_node.load_transfer", "sim_node.drive_cycle"}
 
 
 def _modules() -> dict[str, Path]:

@@ -21,10 +21,10 @@ from rozyn_estimator.tools.trial.spec import TrialSpec
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.departures import Departures, SuspensionLaw
 from sim_node.fixed_point import solve_fixed_point
-from sim_node.halfcar import HalfCarPlant, static_state
 from sim_node.road import RoadSpec
 from sim_node.sensors import GRAVITY_MPS2, Accelerometers
 from sim_node.simulation import SimConfig, Simulation
+from sim_node.vehicle_plant import VehiclePlant, static_state
 
 GAUSSIAN = RoadSpec(amplitudes="gaussian")
 EVERYTHING = Departures(damper_ratio=2.0, spring_progression=1.0, spring_reference_m=0.03,
@@ -89,7 +89,7 @@ def test_stiffer_rebound_jacks_the_body_down(vehicle):
     sim = Simulation(SimConfig(road=GAUSSIAN, duration_s=60.0, seed=2))
     road = sim._road_at(np.arange(30_000))
     x0 = static_state(vehicle, road[0])
-    HalfCarPlant(vehicle, sim.plant.dt_s, x0=x0, u0=road[0], suspension=law).run(road)
+    VehiclePlant(vehicle, sim.plant.dt_s, x0=x0, u0=road[0], suspension=law).run(road)
     e, v = (m[5000:] for m in law.motion)  # after 10 s
     expected = -(1 / 3) * np.array([2800.0, 3500.0]) * np.abs(v).mean(axis=0) / np.array([45e3, 80e3])
     assert np.all(expected < -3e-4)  # about half a millimetre
@@ -122,7 +122,7 @@ def test_blocks_cut_anywhere_give_the_same_run_with_every_departure():
 
 def test_a_suspension_that_does_not_converge_is_refused(vehicle):
     law = Departures(spring_progression=10.0, spring_reference_m=0.001).suspension(vehicle)
-    plant = HalfCarPlant(vehicle, 0.002, suspension=law)
+    plant = VehiclePlant(vehicle, 0.002, suspension=law)
     with pytest.raises(ConfigError, match="departures: the nonlinear suspension did not converge"):
         plant.run(np.column_stack([np.linspace(0, 0.05, 500)] * 2))
     with pytest.raises(ConfigError, match="did not converge"):  # diverging to overflow on the way
@@ -169,13 +169,13 @@ def test_time_offset_is_exact(vehicle, delay_s, refine, channel):
     x0 = static_state(vehicle, road[0])
     delays = (delay_s, 0.0) if channel == 0 else (0.0, delay_s)
     cuts = ((0, 1), (1, 2), (2, 1000), (1000, n))  # the delay's history carries over between blocks
-    plant = HalfCarPlant(vehicle, dt, x0=x0, u0=road[0], delays_s=delays)
+    plant = VehiclePlant(vehicle, dt, x0=x0, u0=road[0], delays_s=delays)
     late = np.vstack([plant.run(road[a:b]) for a, b in cuts])
-    plant = HalfCarPlant(vehicle, dt, x0=x0, u0=road[0])
+    plant = VehiclePlant(vehicle, dt, x0=x0, u0=road[0])
     on_time = np.vstack([plant.run(road[a:b]) for a, b in cuts])
     fine_t = np.arange((n - 1) * refine + 1) * (dt / refine)
     fine_road = np.column_stack([np.interp(fine_t, t, road[:, i]) for i in (0, 1)])
-    fine = HalfCarPlant(vehicle, dt / refine, x0=x0, u0=road[0]).run(fine_road)
+    fine = VehiclePlant(vehicle, dt / refine, x0=x0, u0=road[0]).run(fine_road)
     shift = round(delay_s / dt * refine)
     expected = fine[np.arange(n) * refine - shift][shift:]
     got = late[shift:]

@@ -14,7 +14,7 @@ from rozyn_estimator.method.fit import (
 )
 from rozyn_estimator.method.identification import IdentificationError, Mode
 from rozyn_estimator.vehicle import Vehicle
-from sim_node.halfcar import state_space
+from sim_node.vehicle_plant import state_space
 
 from conftest import TRUTH
 

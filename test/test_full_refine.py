@@ -15,9 +15,9 @@ from rozyn_estimator.method.full import estimate_full
 from rozyn_estimator.method.full.refine import refine_full
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
-from sim_node.fullcar import state_space
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation
+from sim_node.vehicle_plant import state_space
 
 ASYMMETRIC = FullVehicle(
     cog_lateral_m=0.08, cog_from_front_axle_m=1.3, roll_inertia_kgm2=450.0, track_rear_m=1.56,

@@ -8,6 +8,7 @@ import re
 import numpy as np
 import pytest
 
+from rozyn_estimator.body_model import heave_index
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.method.full import FULL_PARAM_NAMES, estimate_full
 from rozyn_estimator.method.full.fit import corner_stiffness, fit_full_inertia, plane_map
@@ -17,9 +18,9 @@ from rozyn_estimator.method.identification import (
     state_transition_modes,
 )
 from rozyn_estimator.vehicle_full import FullVehicle
-from sim_node.fullcar import HEAVE, N_STATE, free_decay
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation
+from sim_node.vehicle_plant import free_decay, n_state
 
 # Every coupling at work: lateral CoG, unequal corners, anti-roll bars, sensors off the wheels.
 ASYMMETRIC = FullVehicle(
@@ -42,8 +43,8 @@ def _free_decay_modes(v: FullVehicle, columns: list[int]):
     """The three body modes identified from free decays started in heave, pitch and roll."""
     decays = []
     for k in range(3):
-        x0 = np.zeros(N_STATE)
-        x0[HEAVE + k] = 0.01
+        x0 = np.zeros(n_state(v))
+        x0[heave_index(v) + k] = 0.01
         decays.append(free_decay(v, x0, 1 / FS_HZ, int(6 * FS_HZ))[1:, columns])
     modes = state_transition_modes(np.stack(decays)[None], 1 / FS_HZ, 14)[0]
     return select_body_modes(modes, (0.5, 4.0), (0.02, 0.9), n_modes=3)

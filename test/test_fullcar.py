@@ -6,19 +6,24 @@ from fullcar_helpers import ASYMMETRIC
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
+from rozyn_estimator.body_model import body_rows, dof, heave_index, second_order_model
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import FullVehicle, centreline_half_car
-from sim_node import fullcar, halfcar
+from sim_node import vehicle_plant
 from sim_node.departures import Departures
-from sim_node.fullcar import HEAVE, PITCH, ROLL, FullCarPlant, body_rows, second_order_model, static_state
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation
+from sim_node.vehicle_plant import VehiclePlant, static_state
+
+N_DOF = dof(FullVehicle())
+HEAVE = heave_index(FullVehicle())
+PITCH, ROLL = HEAVE + 1, HEAVE + 2
 
 
 def test_sign_conventions_follow_rep_103_roll_and_the_half_cars_pitch():
     v = FullVehicle(cog_lateral_m=0.1)
-    q = np.zeros(fullcar.N_DOF)
+    q = np.zeros(N_DOF)
     q[ROLL] = 0.01  # positive roll: right-handed about +x forward, the left side (y > 0) goes up
     left, right = body_rows(v, np.array([[1.2, 0.5], [1.2, -0.5]])) @ q
     assert left == pytest.approx(0.004) and right == pytest.approx(-0.006)  # lever arms y - y_cog
@@ -37,7 +42,7 @@ def test_matrices_are_symmetric_and_rigid_motions_load_no_spring():
     v = ASYMMETRIC
     corners = np.column_stack([v.corner_x_m, v.corner_y_m])
     for body in ([1.0, 0.0, 0.0], [0.0, 0.01, 0.0], [0.0, 0.0, 0.01]):
-        q = np.zeros(fullcar.N_DOF)
+        q = np.zeros(N_DOF)
         q[HEAVE:] = body
         q[:4] = body_rows(v, corners) @ q  # wheels with the body: no suspension deflection
         assert np.allclose(m.stiffness @ q, m.tyre_stiffness @ q[:4], atol=1e-9)
@@ -45,35 +50,35 @@ def test_matrices_are_symmetric_and_rigid_motions_load_no_spring():
 
 def test_a_road_raised_evenly_lifts_the_body_by_as_much():
     h = 0.03
-    q = static_state(ASYMMETRIC, np.full(4, h))[: fullcar.N_DOF]
+    q = static_state(ASYMMETRIC, np.full(4, h))[: N_DOF]
     assert np.allclose(q, [h, h, h, h, h, 0.0, 0.0], atol=1e-12)
-    plant = FullCarPlant(ASYMMETRIC, 0.01, x0=static_state(ASYMMETRIC, np.full(4, h)), u0=np.full(4, h))
+    plant = VehiclePlant(ASYMMETRIC, 0.01, x0=static_state(ASYMMETRIC, np.full(4, h)), u0=np.full(4, h))
     assert np.max(np.abs(plant.run(np.full((200, 4), h)))) < 1e-9  # at rest
 
 
 def test_a_road_higher_on_the_left_rolls_the_body_left_up():
     v = FullVehicle()
     bank = 0.02  # the road plane rises 0.02 m per metre to the left
-    q = static_state(v, bank * np.array(v.corner_y_m))[: fullcar.N_DOF]
+    q = static_state(v, bank * np.array(v.corner_y_m))[: N_DOF]
     assert q[ROLL] == pytest.approx(bank) and abs(q[HEAVE]) < 1e-12 and abs(q[PITCH]) < 1e-12
 
 
 def test_free_decay_from_roll_and_pitch_equals_the_matrix_exponential():
-    x0 = np.zeros(fullcar.N_STATE)
-    x0[PITCH], x0[ROLL], x0[fullcar.N_DOF + ROLL] = 0.004, 0.01, 0.05
+    x0 = np.zeros(2 * N_DOF)
+    x0[PITCH], x0[ROLL], x0[N_DOF + ROLL] = 0.004, 0.01, 0.05
     dt, n = 0.005, 600
-    accel = fullcar.free_decay(ASYMMETRIC, x0, dt, n)
-    ss = fullcar.state_space(ASYMMETRIC)
+    accel = vehicle_plant.free_decay(ASYMMETRIC, x0, dt, n)
+    ss = vehicle_plant.state_space(ASYMMETRIC)
     ref = np.array([ss.c @ expm(ss.a * k * dt) @ x0 for k in range(n)])
     assert np.max(np.abs(accel - ref)) < 1e-10 * np.max(np.abs(ref))
     assert np.max(np.abs(accel[-50:])) < 1e-2 * np.max(np.abs(accel))  # it decays
 
 
 def test_symmetric_car_rolled_keeps_heave_and_pitch_still():
-    x0 = np.zeros(fullcar.N_STATE)
+    x0 = np.zeros(2 * N_DOF)
     x0[ROLL] = 0.01
     v = FullVehicle(anti_roll_stiffness_front_nmprad=10_000.0)
-    plant = FullCarPlant(v, 0.005, x0=x0, points_m=np.array([[0.0, 0.0], [2.8, 0.0], [0.0, 0.75]]))
+    plant = VehiclePlant(v, 0.005, x0=x0, points_m=np.array([[0.0, 0.0], [2.8, 0.0], [0.0, 0.75]]))
     out = plant.run(np.zeros((400, 4)))
     assert np.max(np.abs(out[:, :2])) < 1e-12 * np.max(np.abs(out[:, 2]))  # centreline: no roll
     assert np.max(np.abs(out[:, 2])) > 0.1
@@ -105,7 +110,7 @@ def test_road_driven_response_matches_an_ode_solver():
     sol = solve_ivp(lambda tt, x: np.concatenate([x[7:], qdd(tt, x)]), (0, t_end), x0,
                     t_eval=t, rtol=1e-10, atol=1e-12, max_step=dt)
     ref = np.array([rows @ qdd(tt, x) for tt, x in zip(t, sol.y.T, strict=True)])
-    accel = FullCarPlant(v, dt, x0=x0, u0=_road(0.0)[0][0], points_m=points).run(_road(t)[0])
+    accel = VehiclePlant(v, dt, x0=x0, u0=_road(0.0)[0][0], points_m=points).run(_road(t)[0])
     # first-order hold on a smooth road: error shrinks with dt^2
     assert np.max(np.abs(accel - ref)) < 3e-4 * np.max(np.abs(ref))
 
@@ -113,8 +118,8 @@ def test_road_driven_response_matches_an_ode_solver():
 def test_blocks_concatenate_to_the_whole_run():
     rng = np.random.default_rng(0)
     road = np.cumsum(rng.standard_normal((4000, 4)), axis=0) * 1e-4
-    whole = FullCarPlant(ASYMMETRIC, 0.002).run(road)
-    plant = FullCarPlant(ASYMMETRIC, 0.002)
+    whole = VehiclePlant(ASYMMETRIC, 0.002).run(road)
+    plant = VehiclePlant(ASYMMETRIC, 0.002)
     parts = [plant.run(road[a:b]) for a, b in [(0, 1), (1, 1), (1, 777), (777, 4000)]]
     assert np.allclose(np.vstack(parts), whole, rtol=1e-12, atol=1e-15)
 
@@ -129,19 +134,19 @@ def test_symmetric_full_car_is_its_centreline_half_car():
     rng = np.random.default_rng(1)
     road = np.cumsum(rng.standard_normal((3000, 4)), axis=0) * 1e-4  # FL, FR, RL, RR, all different
     dt = 0.002
-    centre = FullCarPlant(full, dt, points_m=np.array([[0.1, 0.0], [2.7, 0.0]])).run(road)
-    pairs = FullCarPlant(full, dt).run(road)  # the four sensors: left/right means are the centreline
-    expected = halfcar.HalfCarPlant(half, dt).run(0.5 * (road[:, ::2] + road[:, 1::2]))
+    centre = VehiclePlant(full, dt, points_m=np.array([[0.1, 0.0], [2.7, 0.0]])).run(road)
+    pairs = VehiclePlant(full, dt).run(road)  # the four sensors: left/right means are the centreline
+    expected = vehicle_plant.VehiclePlant(half, dt).run(0.5 * (road[:, ::2] + road[:, 1::2]))
     scale = np.max(np.abs(expected))
     assert np.max(np.abs(centre - expected)) < 1e-9 * scale
     assert np.max(np.abs(0.5 * (pairs[:, ::2] + pairs[:, 1::2]) - expected)) < 1e-9 * scale
-    assert np.allclose(fullcar.natural_modes(full)[0][[0, 1]], halfcar.natural_modes(half)[0][:2])
+    assert np.allclose(vehicle_plant.natural_modes(full)[0][[0, 1]], vehicle_plant.natural_modes(half)[0][:2])
 
 
 def _roll_mode_hz(v: FullVehicle) -> float:
     """Frequency of the body's roll mode: the slowest whose shape moves no heave and no pitch (a
     symmetric car's; the antisymmetric wheel hop is the other such mode)."""
-    lam, vec = np.linalg.eig(fullcar.state_space(v).a)
+    lam, vec = np.linalg.eig(vehicle_plant.state_space(v).a)
     body = np.abs(vec[HEAVE : ROLL + 1])
     roll_like = (body[2] > 1e6 * np.maximum(body[0], body[1])) & (lam.imag > 0)
     return float(np.min(np.abs(lam[roll_like])) / (2 * np.pi))
@@ -163,11 +168,11 @@ def test_roll_mode_frequency_is_sqrt_of_roll_stiffness_over_inertia(bars_nmprad)
 
 def test_bad_arguments():
     with pytest.raises(ValueError, match="dt_s"):
-        FullCarPlant(FullVehicle(), 0.0)
+        VehiclePlant(FullVehicle(), 0.0)
     with pytest.raises(ValueError, match=r"\(n, 4\)"):
-        FullCarPlant(FullVehicle(), 0.01).run(np.zeros((10, 2)))
+        VehiclePlant(FullVehicle(), 0.01).run(np.zeros((10, 2)))
     with pytest.raises(ValueError, match="points_m"):
-        FullCarPlant(FullVehicle(), 0.01, points_m=np.zeros((2, 3)))
+        VehiclePlant(FullVehicle(), 0.01, points_m=np.zeros((2, 3)))
 
 
 def test_simulation_runs_the_full_car_in_blocks():

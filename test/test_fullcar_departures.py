@@ -10,12 +10,13 @@ import pytest
 from fullcar_helpers import ASYMMETRIC
 from scipy.integrate import solve_ivp
 
+from rozyn_estimator.body_model import body_rows, sensor_points
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.vehicle_full import FullVehicle
 from sim_node.departures import Departures
-from sim_node.fullcar import FullCarPlant, body_rows, sensor_points, static_state
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation
+from sim_node.vehicle_plant import VehiclePlant, static_state
 
 CAR = ASYMMETRIC  # every coupling at work: lateral CoG, unequal corners, bars, sensors off the axles
 GAUSSIAN = RoadSpec(amplitudes="gaussian")
@@ -81,9 +82,9 @@ def test_nonlinear_suspension_matches_an_ode_solver(ratio, progression):
                      spring_reference_m=reference_m).suspension(CAR)
     errors = []
     for step in (2, 1):  # 1 kHz, 2 kHz
-        plant = FullCarPlant(CAR, step * 5e-4, x0=x0, u0=_road(0.0)[0], suspension=law)
+        plant = VehiclePlant(CAR, step * 5e-4, x0=x0, u0=_road(0.0)[0], suspension=law)
         errors.append(np.max(np.abs(plant.run(_road(t[::step])[0]) - ref[::step])) / np.max(np.abs(ref)))
-    linear = FullCarPlant(CAR, 1e-3, x0=x0, u0=_road(0.0)[0]).run(_road(t[::2])[0])
+    linear = VehiclePlant(CAR, 1e-3, x0=x0, u0=_road(0.0)[0]).run(_road(t[::2])[0])
     assert np.max(np.abs(linear - ref[::2])) / np.max(np.abs(ref)) > 0.05  # the departure is visible
     assert errors[0] < 3e-4
     assert errors[1] < errors[0] / 3.0
@@ -94,8 +95,8 @@ def test_a_nonlinear_run_cut_into_blocks_is_the_whole_run():
     t = np.arange(2000) * 2e-3
     road = _road(t)[0]
     x0 = static_state(CAR, road[0])
-    whole = FullCarPlant(CAR, 2e-3, x0=x0, u0=road[0], suspension=law).run(road)
-    plant = FullCarPlant(CAR, 2e-3, x0=x0, u0=road[0], suspension=law)
+    whole = VehiclePlant(CAR, 2e-3, x0=x0, u0=road[0], suspension=law).run(road)
+    plant = VehiclePlant(CAR, 2e-3, x0=x0, u0=road[0], suspension=law)
     parts = np.vstack([plant.run(road[a:b]) for a, b in ((0, 1), (1, 7), (7, 300), (300, 2000))])
     assert np.allclose(parts, whole, rtol=0, atol=1e-9 * np.max(np.abs(whole)))
 
@@ -111,13 +112,13 @@ def test_the_rear_sensors_late_exactly(delay_s, refine):
     x0 = static_state(CAR, road[0])
     delays = (0.0, 0.0, delay_s, delay_s)
     cuts = ((0, 1), (1, 2), (2, 900), (900, n))
-    plant = FullCarPlant(CAR, dt, x0=x0, u0=road[0], delays_s=delays)
+    plant = VehiclePlant(CAR, dt, x0=x0, u0=road[0], delays_s=delays)
     late = np.vstack([plant.run(road[a:b]) for a, b in cuts])
-    plant = FullCarPlant(CAR, dt, x0=x0, u0=road[0])
+    plant = VehiclePlant(CAR, dt, x0=x0, u0=road[0])
     on_time = np.vstack([plant.run(road[a:b]) for a, b in cuts])
     fine_t = np.arange((n - 1) * refine + 1) * (dt / refine)
     fine_road = np.column_stack([np.interp(fine_t, t, road[:, i]) for i in range(4)])
-    fine = FullCarPlant(CAR, dt / refine, x0=x0, u0=road[0]).run(fine_road)
+    fine = VehiclePlant(CAR, dt / refine, x0=x0, u0=road[0]).run(fine_road)
     shift = round(delay_s / dt * refine)
     expected = fine[np.arange(n) * refine - shift][shift:]
     assert np.max(np.abs(late[shift:, 2:] - expected[:, 2:])) < 1e-9 * np.max(np.abs(expected))

@@ -16,8 +16,7 @@ from rozyn_estimator.tools.trial.run import estimate_block, simulate
 from rozyn_estimator.tools.trial.spec import TrialSpec
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
-from sim_node.fullcar import FullCarPlant
-from sim_node.halfcar import HalfCarPlant
+from sim_node.vehicle_plant import VehiclePlant
 
 DT_S = 1e-3
 HEIGHTS = {"cog_height_m": 0.55, "wheel_centre_height_m": 0.30}  # h = 0.25 m, a car's
@@ -72,7 +71,7 @@ def test_half_car_plant_matches_a_multibody_integration() -> None:
 
     _assert_plant_matches(car, road, np.array([lf, -lr]),
                           lambda t: np.column_stack([_road(t)[0], _road(t - delay_s)[0]]),
-                          HalfCarPlant, v, Vehicle())
+                          VehiclePlant, v, Vehicle())
 
 
 def test_full_car_plant_matches_a_multibody_integration_in_roll() -> None:
@@ -94,7 +93,7 @@ def test_full_car_plant_matches_a_multibody_integration_in_roll() -> None:
         return sign * r, sign * d
 
     _assert_plant_matches(car, road, np.array(v.sensor_y_m), lambda t: _road(t)[0][:, None] * sign,
-                          FullCarPlant, v, FullVehicle())
+                          VehiclePlant, v, FullVehicle())
 
 
 def test_heights_come_in_pairs() -> None:

@@ -5,18 +5,10 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
+from rozyn_estimator.body_model import second_order_model, sensor_rows, suspension_rows
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.departures import Departures
-from sim_node.halfcar import (
-    HalfCarPlant,
-    free_decay,
-    natural_modes,
-    second_order_model,
-    sensor_rows,
-    state_space,
-    static_state,
-    suspension_rows,
-)
+from sim_node.vehicle_plant import VehiclePlant, free_decay, natural_modes, state_space, static_state
 
 
 def test_matrices_follow_eqs_3_4_to_3_7_with_typos_fixed(vehicle):
@@ -76,7 +68,7 @@ def test_road_driven_response_matches_an_ode_solver(vehicle):
     sol = solve_ivp(lambda tt, x: np.concatenate([x[4:], qdd(tt, x)]), (0, t_end), x0,
                     t_eval=t, rtol=1e-10, atol=1e-12, max_step=dt)
     ref = np.array([sensor_rows(vehicle) @ qdd(tt, x) for tt, x in zip(t, sol.y.T, strict=True)])
-    plant = HalfCarPlant(vehicle, dt, x0=x0, u0=_road(0.0)[0])
+    plant = VehiclePlant(vehicle, dt, x0=x0, u0=_road(0.0)[0])
     accel = plant.run(_road(t)[0])
     # first-order hold on a smooth road: error shrinks with dt^2; 1e-4 relative at 1 kHz
     assert np.max(np.abs(accel - ref)) < 3e-4 * np.max(np.abs(ref))
@@ -85,8 +77,8 @@ def test_road_driven_response_matches_an_ode_solver(vehicle):
 def test_blocks_concatenate_to_the_whole_run(vehicle):
     rng = np.random.default_rng(0)
     road = np.cumsum(rng.standard_normal((5000, 2)), axis=0) * 1e-4
-    whole = HalfCarPlant(vehicle, 0.002).run(road)
-    plant = HalfCarPlant(vehicle, 0.002)
+    whole = VehiclePlant(vehicle, 0.002).run(road)
+    plant = VehiclePlant(vehicle, 0.002)
     parts = [plant.run(road[a:b]) for a, b in [(0, 1), (1, 1), (1, 777), (777, 5000)]]
     # equal up to rounding (BLAS kernels differ with block length)
     assert np.allclose(np.vstack(parts), whole, rtol=1e-12, atol=1e-15)
@@ -94,15 +86,15 @@ def test_blocks_concatenate_to_the_whole_run(vehicle):
 
 def test_static_state_is_at_rest(vehicle):
     u = np.array([0.02, -0.01])
-    plant = HalfCarPlant(vehicle, 0.01, x0=static_state(vehicle, u), u0=u)
+    plant = VehiclePlant(vehicle, 0.01, x0=static_state(vehicle, u), u0=u)
     assert np.max(np.abs(plant.run(np.tile(u, (200, 1))))) < 1e-9
 
 
 def test_bad_arguments(vehicle):
     with pytest.raises(ValueError, match="dt_s"):
-        HalfCarPlant(vehicle, 0.0)
+        VehiclePlant(vehicle, 0.0)
     with pytest.raises(ValueError, match=r"\(n, 2\)"):
-        HalfCarPlant(vehicle, 0.01).run(np.zeros(10))
+        VehiclePlant(vehicle, 0.01).run(np.zeros(10))
 
 
 def test_other_vehicle_modes_move():
@@ -158,9 +150,9 @@ def test_nonlinear_suspension_matches_an_ode_solver(vehicle, ratio, progression)
                      spring_reference_m=reference_m).suspension(vehicle)
     errors = []
     for step in (2, 1):  # 1 kHz, 2 kHz
-        plant = HalfCarPlant(vehicle, step * 5e-4, x0=x0, u0=_road(0.0)[0], suspension=law)
+        plant = VehiclePlant(vehicle, step * 5e-4, x0=x0, u0=_road(0.0)[0], suspension=law)
         errors.append(np.max(np.abs(plant.run(_road(t[::step])[0]) - ref[::step])) / np.max(np.abs(ref)))
-    linear = HalfCarPlant(vehicle, 1e-3, x0=x0, u0=_road(0.0)[0]).run(_road(t[::2])[0])
+    linear = VehiclePlant(vehicle, 1e-3, x0=x0, u0=_road(0.0)[0]).run(_road(t[::2])[0])
     assert np.max(np.abs(linear - ref[::2])) / np.max(np.abs(ref)) > 0.05  # the departure is visible
     assert errors[0] < 3e-4
     assert errors[1] < errors[0] / 3.0  # second order in the step

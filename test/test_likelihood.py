@@ -20,9 +20,9 @@ from rozyn_estimator.method.likelihood import (
 )
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.vehicle import Vehicle
-from sim_node.halfcar import state_space
 from sim_node.road import REFERENCE_CPM, RoadSpec, iso_gd_n0_m3
 from sim_node.simulation import SimConfig, Simulation
+from sim_node.vehicle_plant import state_space
 
 from conftest import TRUTH
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rozyn_estimator.body_model import HALF_PITCH, half_car_model, half_car_sensor_rows
+from rozyn_estimator.body_model import pitch_index, second_order_model, sensor_rows
 from rozyn_estimator.method import METHODS, estimate, pipeline
 from rozyn_estimator.method.load_transfer import (
     fit_without_load_transfer,
@@ -39,12 +39,12 @@ def _flat_run(vehicle: Vehicle | FullVehicle, seconds: float) -> tuple[np.ndarra
 
 def test_braking_pitches_the_nose_down():
     v = Vehicle(**HEIGHTS)
-    model = pitch_moment_model(half_car_model(v), HALF_PITCH, v.sprung_mass_kg, v.cog_height_m)
+    model = pitch_moment_model(second_order_model(v), pitch_index(v), v.sprung_mass_kg, v.cog_height_m)
     q = static_state_of(model, np.array([-2.0]))[:4]  # braking at 2 m/s², held
-    front, rear = half_car_sensor_rows(v) @ q
-    assert q[HALF_PITCH] < 0.0 and front < 0.0 < rear  # nose down (pitch positive nose up)
+    front, rear = sensor_rows(v) @ q
+    assert q[pitch_index(v)] < 0.0 and front < 0.0 < rear  # nose down (pitch positive nose up)
     # the moment m h a_x against the pitch stiffness, within its corners' compliance
-    assert -q[HALF_PITCH] == pytest.approx(v.sprung_mass_kg * 0.55 * 2.0 / 1.3e5, rel=0.5)
+    assert -q[pitch_index(v)] == pytest.approx(v.sprung_mass_kg * 0.55 * 2.0 / 1.3e5, rel=0.5)
 
 
 @pytest.mark.parametrize("vehicle", [Vehicle(**HEIGHTS), FullVehicle(cog_lateral_m=0.05, **HEIGHTS)],

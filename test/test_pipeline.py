@@ -11,9 +11,9 @@ from rozyn_estimator.method.fit import corner_impedances
 from rozyn_estimator.method.likelihood.fit import _agrees
 from rozyn_estimator.method.pipeline import _decays, _identify_and_fit
 from rozyn_estimator.vehicle import Vehicle
-from sim_node.halfcar import state_space
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation
+from sim_node.vehicle_plant import state_space
 
 from conftest import TRUTH
 

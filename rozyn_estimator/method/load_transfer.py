@@ -36,16 +36,7 @@ import numpy as np
 from scipy import fft
 from scipy.signal import butter, sosfiltfilt
 
-from rozyn_estimator.body_model import (
-    FULL_PITCH,
-    HALF_PITCH,
-    full_car_model,
-    full_car_sensor_rates,
-    full_car_sensor_rows,
-    half_car_model,
-    half_car_sensor_rates,
-    half_car_sensor_rows,
-)
+from rozyn_estimator.body_model import pitch_index, second_order_model, sensor_rates, sensor_rows
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import FullVehicle
@@ -88,14 +79,10 @@ def load_transfer_mps2(vehicle: Vehicle | FullVehicle, accel_x_mps2: np.ndarray,
     """(n, sensors) the body's vertical acceleration at the sensors (a gyro's rate; the full car's:
     those of ``columns``, default all four) from the load transfer of the longitudinal acceleration
     ``accel_x_mps2`` (n,) (see the module's docstring)."""
-    if isinstance(vehicle, FullVehicle):
-        model, pitch = full_car_model(vehicle), FULL_PITCH
-        rows, rates = full_car_sensor_rows(vehicle), full_car_sensor_rates(vehicle)  # a block's gyros: rates
-        if columns is not None:
-            rows, rates = rows[list(columns)], rates[list(columns)]
-    else:
-        model, rows, pitch = half_car_model(vehicle), half_car_sensor_rows(vehicle), HALF_PITCH
-        rates = half_car_sensor_rates(vehicle)  # a gyro reads the rate: iω, not -ω²
+    model, pitch = second_order_model(vehicle), pitch_index(vehicle)
+    rows, rates = sensor_rows(vehicle), sensor_rates(vehicle)  # a gyro reads the rate: iω, not -ω²
+    if columns is not None:
+        rows, rates = rows[list(columns)], rates[list(columns)]
     a = np.asarray(accel_x_mps2, dtype=float)
     n = a.size
     nfft = fft.next_fast_len(2 * n, real=True)

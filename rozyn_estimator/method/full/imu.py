@@ -3,7 +3,7 @@ heave, pitch and roll) for Rozyn's stage, and its gyros' signs checked before ei
 
 Rozyn's stage identifies the body's modes from vertical accelerations at known points. The
 block's channels give the body's three accelerations ``(z₀'', φ'', θ'')`` by least squares on
-their rows (:func:`~rozyn_estimator.body_model.full_car_channel_rows`; a gyro's rate
+their rows (:func:`~rozyn_estimator.body_model.channel_rows`; a gyro's rate
 differenced, as the half car's: :mod:`rozyn_estimator.method.imu`), and from them the four
 corners'. The stage only starts the likelihood fit, which models each channel exactly.
 """
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rozyn_estimator.body_model import full_car_channel_rows
+from rozyn_estimator.body_model import channel_rows
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.imu import SIGN_SCORE, sign_scores
 from rozyn_estimator.vehicle_full import FullVehicle
@@ -36,7 +36,7 @@ def stage_input(y: np.ndarray, fs_hz: float, vehicle: FullVehicle,
     accelerations from the body's (see the module's docstring)."""
     if vehicle.sensors is None:
         return y, vehicle, index
-    rows, rate = full_car_channel_rows(vehicle, index)
+    rows, rate = channel_rows(vehicle, index)
     data = np.array(y, dtype=float)
     data[:, rate] = np.gradient(data[:, rate], 1.0 / fs_hz, axis=0)  # a rate's derivative
     body = np.linalg.lstsq(rows, data.T, rcond=None)[0]  # (3, n): z₀'', φ'', θ''

@@ -34,7 +34,7 @@ import numpy as np
 from numpy.polynomial import legendre
 from scipy import sparse, special
 
-from rozyn_estimator.body_model import full_car_channel_rows
+from rozyn_estimator.body_model import channel_rows
 from rozyn_estimator.gravity import gravity_height_m, rotation_inertia_kgm2, rotation_stiffness_nmprad
 from rozyn_estimator.method.full.fit import corner_matrices, corner_response_derivatives
 from rozyn_estimator.method.full.grid import ALIAS_SPACING_HZ, alias_map, apply, evaluation_map
@@ -212,7 +212,7 @@ class FullCarSpectrum:
         """iω P (F, k, 3): the sensors' accelerations from the body's velocities (q̇) (a gyro's
         rate: P), each channel times its ``channel_factor`` (k,) or (F, k)."""
         w = self.omega
-        P, rate = full_car_channel_rows(v, self.sensors)  # a gyro reads q̇ itself, not iω q̇
+        P, rate = channel_rows(v, self.sensors)  # a gyro reads q̇ itself, not iω q̇
         factor = np.ones((w.size, self.k)) if channel_factor is None else \
             np.broadcast_to(channel_factor, (w.size, self.k))
         out = np.where(rate[None, :, None], 1.0, 1j * w[:, None, None]) * factor[:, :, None] * P[None]
