@@ -13,6 +13,7 @@ from rozyn_estimator.method.likelihood.road_input import (
     steady_driving,
     steady_gates,
     steady_window,
+    track_mixture,
     travel_delays,
 )
 from rozyn_estimator.online import NS, OnlineConfig, OnlineEstimator
@@ -48,6 +49,19 @@ def test_the_mixture_at_one_speed_is_the_wheelbase_delay_and_standing_carries_no
     share, _ = road_mixture(omega, 2.8, crawl, None, 5.0, 100.0)
     np.testing.assert_allclose(share[omega / (2 * np.pi) > 110.0], 0.0)  # the road ended above 5 cycles/m
     assert np.all(share > 0)
+
+
+def test_a_mixture_sums_its_delays_exactly_and_is_built_once_per_drive():
+    rng = np.random.default_rng(4)
+    omega = 2 * np.pi * np.linspace(-120.0, 120.0, 2001)
+    speed = np.abs(15.0 + np.cumsum(rng.normal(0.0, 0.05, 6000)))
+    mix = track_mixture(omega, 2.8, 1.5, speed, None, 5.0, 100.0)
+    direct = (mix.weights * np.exp(-1j * np.multiply.outer(omega, mix.tau))).sum(axis=1)
+    np.testing.assert_allclose(mix.phi, direct, rtol=0.0, atol=1e-12)  # Horner's sum, a histogram's bins
+    np.testing.assert_allclose(mix.phase, np.exp(-1j * np.multiply.outer(omega, mix.tau)))
+    assert track_mixture(omega, 2.8, 1.5, speed.copy(), None, 5.0, 100.0) is mix  # the model's variants
+    assert track_mixture(omega, 2.8, 1.5, speed * 1.01, None, 5.0, 100.0) is not mix
+    assert track_mixture(omega, 2.9, 1.5, speed, None, 5.0, 100.0) is not mix  # the budget's wheelbase
 
 
 def test_steady_stretches_are_ramped_in_and_out():

@@ -40,12 +40,12 @@ from rozyn_estimator.method.full.fit import corner_matrices, corner_response_der
 from rozyn_estimator.method.full.grid import ALIAS_SPACING_HZ, alias_map, apply, evaluation_map
 from rozyn_estimator.method.full.uncertainty import sensing as sensor_model
 from rozyn_estimator.method.likelihood.road_input import (
-    TrackMixture,
     delay_characteristic,
     driving_speed,
     is_varying,
     spatial_band,
     track_coherence,
+    track_mixture,
 )
 from rozyn_estimator.vehicle_full import FullVehicle
 
@@ -187,8 +187,8 @@ class FullCarSpectrum:
             self.gravity_height_m = gravity_height_m(v)
             self.unsprung_total_kg = float(sum(v.unsprung_mass_kg))
             speeds = np.asarray(self.speed_mps)
-            self.mixture = TrackMixture(w, v.wheelbase_m, v.track_front_m, speeds, self.sample_weights,
-                                        self.road_max_cpm, self.fs_hz) if self.varying else None
+            self.mixture = track_mixture(w, v.wheelbase_m, v.track_front_m, speeds, self.sample_weights,
+                                         self.road_max_cpm, self.fs_hz) if self.varying else None
             share, phi = (self.mixture.share, self.mixture.phi) if self.mixture is not None else \
                 (np.ones(w.shape), delay_characteristic(w, v.wheelbase_m, self.speed_mps))
             speed = driving_speed(self.speed_mps, self.sample_weights)  # the budget's coherence
