@@ -5,7 +5,7 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
-from rozyn_estimator.body_model import second_order_model, sensor_rows, suspension_rows
+from rozyn_estimator.body_model import body_rows, second_order_model, sensor_rows, suspension_rows
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.departures import Departures
 from sim_node.vehicle_plant import VehiclePlant, free_decay, natural_modes, state_space, static_state
@@ -95,6 +95,17 @@ def test_bad_arguments(vehicle):
         VehiclePlant(vehicle, 0.0)
     with pytest.raises(ValueError, match=r"\(n, 2\)"):
         VehiclePlant(vehicle, 0.01).run(np.zeros(10))
+    with pytest.raises(ValueError, match="centreline"):  # a half car does not roll
+        VehiclePlant(vehicle, 0.01, points_m=np.array([[0.5, 0.3]]))
+
+
+def test_points_on_the_body_read_its_heave_and_pitch(vehicle):
+    q = np.zeros(4)
+    q[2], q[3] = 0.01, 0.002  # heave at the CoG, pitch nose up
+    points = np.array([[0.0, 0.0], [1.2, 0.0], [2.8, 0.0]])
+    plant = VehiclePlant(vehicle, 0.01, points_m=points)
+    assert plant.n_road == 2
+    assert body_rows(vehicle, points) @ q == pytest.approx([0.01 + 1.2 * 0.002, 0.01, 0.01 - 1.6 * 0.002])
 
 
 def test_other_vehicle_modes_move():
