@@ -33,7 +33,10 @@ over the estimates' rms error was 1.09 on average and 20 of the 150 coverages we
 90-98 %; with the intermittency alone 1.01 and 4 of 150 (a right std misses about 7: 100 roads
 are few).
 
-The factors are one per parameter, applied to the variances (the correlations stay).
+The factors are one per parameter, applied to the variances (the correlations stay). On a
+varying drive each stretch of the window at its own speed has its own spectrum, and the
+factors come from those (:mod:`.stretches`), the road's intermittency multiplying each
+stretch's road part.
 """
 
 from __future__ import annotations
@@ -42,6 +45,7 @@ import numpy as np
 from scipy import fft as sfft
 
 from rozyn_estimator.method.full.score import spectrum_itself
+from rozyn_estimator.method.full.stretches import Stretches, drive_stretches, pairs, stretched_factors
 from rozyn_estimator.method.full.whittle import FullWhittle
 from rozyn_estimator.method.likelihood.spectra import Spectra
 
@@ -49,30 +53,40 @@ from rozyn_estimator.method.likelihood.spectra import Spectra
 def variance_factors(objective: FullWhittle, theta: np.ndarray, combos: np.ndarray, spectra: Spectra,
                      noise_share: np.ndarray, taper: float) -> np.ndarray:
     """(q,) the factors on the model's variances of the ``combos`` (q, n_params) directions
-    for the window's intermittency (module docstring); ones when the samples are not at hand
-    (a window without its DFT)."""
+    for the window's intermittency (module docstring) and, on a varying drive, its stretches
+    at different speeds (:func:`drive_stretches`); ones when the samples are not at hand (a
+    window without its DFT)."""
     if spectra.dft is None:
         return np.ones(combos.shape[0])
     samples = _band_samples(spectra, spectra.dft[None])[0]
-    return intermittency_factors(objective, theta, combos, samples, noise_share, taper)
+    model = objective.model
+    stretches = None
+    if model.mixture is not None and np.size(model.speed_mps) == spectra.n_samples:
+        stretches = drive_stretches(model.vehicle.wheelbase_m, np.asarray(model.speed_mps), spectra.fs_hz,
+                                    taper)
+    return intermittency_factors(objective, theta, combos, samples, noise_share, taper, stretches)
 
 
 def intermittency_factors(objective: FullWhittle, theta: np.ndarray, combos: np.ndarray,
-                          samples: np.ndarray, noise_share: np.ndarray, taper: float) -> np.ndarray:
-    """(q,) ``1 + (κ - 1) ρ`` per direction: ``κ`` the road's intermittency
+                          samples: np.ndarray, noise_share: np.ndarray, taper: float,
+                          stretches: Stretches | None = None) -> np.ndarray:
+    """(q,) per direction: ``1 + (κ - 1) ρ``, ``κ`` the road's intermittency
     (:func:`road_intermittency`), ``ρ`` the share of the direction's score variance that is
-    the road's alone, ``Σ tr(A S_r A S_r) / Σ tr(A S A S)`` (module docstring)."""
-    kappa = road_intermittency(samples, noise_share, taper)
+    the road's alone, ``Σ tr(A S_r A S_r) / Σ tr(A S A S)`` (module docstring); on a varying
+    drive's ``stretches``, each stretch's own spectrum (:func:`.stretches.stretched_factors`)."""
+    m4 = channel_kurtosis(samples, taper)
+    if m4 is None:
+        return np.ones(combos.shape[0])
+    A = objective.score_kernels(theta, combos)
+    S, _ = objective.factored(theta)
+    total = pairs(A, S, S, objective.counts)
+    if stretches is not None:
+        return stretched_factors(objective, theta, A, total, m4, stretches)
+    kappa = _pooled(*channel_intermittency(m4, noise_share))
     if kappa <= 1.0:
         return np.ones(combos.shape[0])
-    S, _ = objective.factored(theta)
     road = road_itself(objective, theta)
-    A = objective.score_kernels(theta, combos)
-    counts = objective.counts
-    ar, a_all = A @ road[None], A @ S[None]
-    road_only = np.einsum("qkab,qkba,k->q", ar, ar, counts).real
-    total = np.einsum("qkab,qkba,k->q", a_all, a_all, counts).real
-    share = np.clip(road_only / np.where(total > 0, total, np.inf), 0.0, 1.0)
+    share = np.clip(pairs(A, road, road, objective.counts) / np.where(total > 0, total, np.inf), 0.0, 1.0)
     return 1.0 + (kappa - 1.0) * share
 
 
@@ -88,26 +102,41 @@ def road_itself(objective: FullWhittle, theta: np.ndarray) -> np.ndarray:
 
 def road_intermittency(samples: np.ndarray, noise_share: np.ndarray, taper: float) -> float:
     """``κ = E[Y²]/E[Y]²`` of the road's envelope over this window (1 for a Gaussian road),
-    from the kurtosis of the band-limited samples ``(n, k)`` where the taper is flat.
+    from the kurtosis of the band-limited samples ``(n, k)`` where the taper is flat
+    (:func:`channel_intermittency`, pooled; never below 1: a mixture's ``κ`` cannot be)."""
+    m4 = channel_kurtosis(samples, taper)
+    return 1.0 if m4 is None else _pooled(*channel_intermittency(m4, noise_share))
 
-    Per channel ``x = √Y r + e`` (road part ``r``, power share ``1 - η``; noise ``e``,
-    share ``η`` = ``noise_share``): ``E x⁴ / (E x²)² = 3 (κ (1 - η)² + 2 η (1 - η) + η²)``.
-    The channels' values are pooled with weights ``(1 - η)²`` (a channel mostly noise says
-    little); never below 1 (a mixture's ``κ`` cannot be)."""
+
+def channel_kurtosis(samples: np.ndarray, taper: float) -> np.ndarray | None:
+    """(k,) each channel's ``E x⁴ / (E x²)²`` where the taper is flat (None: a silent channel)."""
     n = samples.shape[0]
     edge = int(np.ceil(0.5 * taper * n)) + 1
     x = samples[edge: n - edge] if n - 2 * edge > 100 else samples
     squares = x * x  # and their squares: x**4 calls pow per element, 15 times slower
     power = np.mean(squares, axis=0)
     if not np.all(power > 0):
-        return 1.0
-    m4 = np.mean(squares * squares, axis=0) / power**2
+        return None
+    return np.asarray(np.mean(squares * squares, axis=0) / power**2)
+
+
+def channel_intermittency(m4: np.ndarray, noise_share: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(each channel's ``κ``, its weight in the pool) from its kurtosis ``m4``.
+
+    Per channel ``x = √Y r + e`` (road part ``r``, power share ``1 - η``; noise ``e``,
+    share ``η`` = ``noise_share``): ``E x⁴ / (E x²)² = 3 (κ (1 - η)² + 2 η (1 - η) + η²)``.
+    The channels' values are pooled with weights ``(1 - η)²`` (a channel mostly noise says
+    little)."""
     eta = np.clip(np.asarray(noise_share, dtype=float), 0.0, 1.0)
     road = 1.0 - eta
     weights = road**2
+    per_channel = (m4 / 3.0 - 2.0 * eta * road - eta**2) / np.where(weights > 0, weights, 1.0)
+    return per_channel, weights
+
+
+def _pooled(per_channel: np.ndarray, weights: np.ndarray) -> float:
     if weights.sum() <= 0:
         return 1.0
-    per_channel = (m4 / 3.0 - 2.0 * eta * road - eta**2) / np.where(weights > 0, weights, 1.0)
     return float(max(1.0, np.sum(weights * per_channel) / weights.sum()))
 
 

@@ -4,6 +4,7 @@ behind the front over a window's speed profile; and how far it reaches in freque
 
 from __future__ import annotations
 
+import copy
 import functools
 import hashlib
 from collections import OrderedDict
@@ -41,22 +42,42 @@ def delay_slope(omega: np.ndarray, wheelbase_m: float, speed_mps: float | np.nda
 def _delays(wheelbase_m: float, speed_mps: float | np.ndarray, sample_weights: np.ndarray | None = None,
             fs_hz: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """(the delays τ [s], their weights summing to 1): one for a constant speed, else the
-    delays' distribution on 64 bins weighted by speed and the samples' weights (cheap, and
-    exact to far below the band); samples slower than :data:`DRIVING_MPS` count as standing.
-    With the samples' rate ``fs_hz`` each delay is the time the front wheel took to the rear's
-    place (:func:`travel_delays`), else ``L/v``."""
+    delays' distribution on :data:`DELAY_BINS` bins weighted by speed and the samples' weights
+    (cheap, and exact to far below the band); samples slower than :data:`DRIVING_MPS` count as
+    standing. With the samples' rate ``fs_hz`` each delay is the time the front wheel took to
+    the rear's place (:func:`travel_delays`), else ``L/v``."""
     v = np.atleast_1d(np.asarray(speed_mps, dtype=float))
     if np.ptp(v) <= 1e-9 * v.mean():
         return np.array([wheelbase_m / v.mean()]), np.ones(1)
     w = v if sample_weights is None else v * np.asarray(sample_weights, dtype=float)
+    tau, bins = delay_bins(wheelbase_m, v, fs_hz)
+    if tau.size == 0:  # no driving: no road
+        return np.array([wheelbase_m / DRIVING_MPS]), np.zeros(1)
+    weights = np.bincount(bins[bins >= 0], weights=w[bins >= 0], minlength=tau.size)
+    return tau, weights / weights.sum()
+
+
+DELAY_BINS = 64  # a varying drive's wheelbase delays, binned
+
+
+def delay_bins(wheelbase_m: float, speed_mps: np.ndarray,
+               fs_hz: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """(the bins' delays τ [s] (none where nothing is driven; one for one speed), each sample's
+    bin (-1: not :func:`steady_driving`)) of a varying drive's samples: :data:`DELAY_BINS`
+    equal bins over the driven samples' delays (:func:`travel_delays`; ``L/v`` without ``fs_hz``)."""
+    v = np.atleast_1d(np.asarray(speed_mps, dtype=float))
     tau = travel_delays(wheelbase_m, v, fs_hz) if fs_hz > 0 else wheelbase_m / np.maximum(v, DRIVING_MPS)
     moving = steady_driving(wheelbase_m, v, fs_hz, tau)
-    if not np.any(moving):  # no driving: no road
-        return np.array([wheelbase_m / DRIVING_MPS]), np.zeros(1)
-    if np.ptp(tau[moving]) <= 1e-9 * tau[moving].mean():  # one speed while driving
-        return tau[moving][:1], np.ones(1)
-    weights, edges = np.histogram(tau[moving], bins=64, weights=w[moving])
-    return 0.5 * (edges[:-1] + edges[1:]), weights / weights.sum()
+    bins = np.full(v.size, -1)
+    if not np.any(moving):
+        return np.zeros(0), bins
+    driven = tau[moving]
+    if np.ptp(driven) <= 1e-6 * driven.mean():  # one speed while driving (the delays' rounding: 4e-8)
+        bins[moving] = 0
+        return driven[:1], bins
+    edges = np.histogram_bin_edges(driven, bins=DELAY_BINS)
+    bins[moving] = np.clip(np.searchsorted(edges, driven, side="right") - 1, 0, DELAY_BINS - 1)
+    return 0.5 * (edges[:-1] + edges[1:]), bins
 
 
 def travel_delays(wheelbase_m: float, speed_mps: np.ndarray, fs_hz: float) -> np.ndarray:
@@ -219,6 +240,18 @@ class TrackMixture:
     def phase(self) -> np.ndarray:
         """(F, K) ``e^(-iωτ)`` of each bin (built when the tracks' coherence first needs it)."""
         return np.exp(-1j * np.multiply.outer(self.omega, self.tau))
+
+    def part(self, keep: np.ndarray) -> TrackMixture:
+        """The road of the delay bins ``keep`` (K,) bool alone, weighted as in the whole (the
+        drive's stretches at those speeds: their shares of the whole sum to it)."""
+        keep = np.asarray(keep, dtype=bool)
+        out = copy.copy(self)
+        out.__dict__.pop("phase", None)
+        out.weights, out.tau, out.x = self.weights[:, keep], self.tau[keep], self.x[:, keep]
+        if "phase" in self.__dict__:
+            out.phase = self.phase[:, keep]
+        out.share, out.phi = out.weights.sum(axis=1), _delayed_sum(out.weights, self.omega, out.tau)
+        return out
 
     def coherence(self, scale: float) -> tuple[np.ndarray, np.ndarray]:
         """``(G, dG/dc)`` (F, 2, 2) at the tracks' separation scale ``e^c``."""

@@ -1,0 +1,146 @@
+"""A varying drive's stretches: how much more the full car's estimate varies when the window's
+road comes at several speeds (:func:`stretched_factors`).
+
+The likelihood of a varying drive models the window's spectrum as the mixture of its
+stretches' local spectra, ``S = Σ_g π_g Ŝ_g`` (``π_g`` each stretch's share of the tapered
+window, :mod:`~rozyn_estimator.method.likelihood.road_input`). That is the periodogram's
+expectation, but not its covariance: neighbouring DFT ordinates are correlated by the
+window's changing power, and the score of a direction with kernels ``A = S⁻¹ (c·∂S) S⁻¹``
+varies as ``Σ_g ω_g Σ_k tr(A Ŝ_g A Ŝ_g)`` (``ω_g`` the stretch's share of the taper's fourth
+power; a locally stationary process), not as ``Σ_k tr(A S A S)``. How much more depends on
+the direction: the roll inertia and the lateral CoG draw their information from the tracks'
+difference, whose power grows at low speed (the tracks' coherence falls with the spatial
+frequency ``f / v``), the mass from the heave, whose power falls with the speed. The
+samples the model masks (standing, pulling away: their data are zeroed) carry nothing, so a
+window masked in part counts the rest for more. Measured on urban windows (the full car, 12
+roads, exact vehicle) with one road intermittency factor for every parameter (the samples'
+kurtosis, which the speed's envelope raises to about 1.9): the mass's std was 1.25 times its
+spread, the roll inertia's and the lateral CoG's 0.78.
+
+The road's own intermittency (:mod:`.intermittency`) multiplies each stretch's road part:
+the samples' kurtosis is compared with what the stretches' powers alone give
+(``E[x⁴]/3 = κ E_u[P²] + 2 E_u[P N] + E_u[N²]``, ``u`` the flat taper's shares).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rozyn_estimator.method.full.grid import apply
+from rozyn_estimator.method.full.spectrum import FullCarSpectrum, herm
+from rozyn_estimator.method.full.whittle import FullWhittle
+from rozyn_estimator.method.likelihood.grid import lagrange_matrix
+from rozyn_estimator.method.likelihood.road_input import delay_bins, is_varying
+from rozyn_estimator.method.likelihood.spectra import taper_window
+
+GROUPS = 5  # the drive's delay bins in this many stretches of equal time (a group costs ~5 ms)
+
+
+@dataclass(frozen=True)
+class Stretches:
+    """A varying drive's samples in groups of nearly the same speed (masked samples in none)."""
+
+    parts: np.ndarray  # (G, bins) bool: each group's delay bins (the mixture's)
+    time: np.ndarray  # (G,) its share of the taper's square over the window, π
+    fourth: np.ndarray  # (G,) its share of the taper's fourth power, ω
+    flat: np.ndarray  # (G,) its share of the samples where the taper is flat (the kurtosis'), u
+
+
+def drive_stretches(wheelbase_m: float, speed_mps: np.ndarray, fs_hz: float, taper: float,
+                    groups: int = GROUPS) -> Stretches | None:
+    """The window's stretches (None: one speed while driving, or no driving)."""
+    if not is_varying(speed_mps):
+        return None
+    tau, bins = delay_bins(wheelbase_m, speed_mps, fs_hz)
+    if tau.size < 2:
+        return None
+    n = bins.size
+    w2 = taper_window(n, taper) ** 2
+    edge = int(np.ceil(0.5 * taper * n)) + 1
+    flat = np.zeros(n)
+    flat[edge: n - edge] = 1.0
+    driven = bins >= 0
+
+    def shares(weight: np.ndarray) -> np.ndarray:
+        return np.bincount(bins[driven], weights=weight[driven], minlength=tau.size) / weight.sum()
+
+    time = shares(w2)
+    middle = (np.cumsum(time) - 0.5 * time) / max(time.sum(), 1e-300)
+    group = np.minimum((middle * groups).astype(int), groups - 1)
+    parts = np.array([group == g for g in range(groups) if np.any(time[group == g] > 0)])
+    if parts.shape[0] < 2:
+        return None
+    fourth, on_flat = shares(w2 * w2), shares(flat)
+    return Stretches(parts, parts @ time, parts @ fourth, parts @ on_flat)
+
+
+def road_parts(objective: FullWhittle, theta: np.ndarray, parts: np.ndarray) -> np.ndarray:
+    """(G, K, k, k) S's road part itself (no taper's smoothing) at the fit's frequencies from
+    each group of the mixture's delay bins alone, weighted as in the whole (the groups sum to it)."""
+    model: FullCarSpectrum = objective.model
+    assert model.mixture is not None
+    _, H, _, _, _ = model.body_motion(theta)
+    reads = model.sensing_at(theta) @ H
+    weight = model.road_weight(theta)[:, None, None]
+    scale = float(np.exp(theta[model.index["ln_coherence_scale"]]))
+    nodes = []
+    for keep in parts:
+        mix = model.mixture.part(keep)
+        delay = np.stack([mix.share, mix.phi.conj(), mix.phi, mix.share], axis=-1).reshape(-1, 2, 2)
+        inputs = weight * model.road_inputs(mix.coherence(scale)[0], delay=delay)
+        nodes.append(model.fold(reads @ inputs @ herm(reads)))
+    at_nodes = np.stack(nodes)
+    if model.grid_hz <= 0:  # S at each frequency: the nodes are the targets, with one beyond each
+        return at_nodes if at_nodes.shape[1] == model.freq_hz.size else at_nodes[:, 1:-1]  # end to smooth
+    first_node_hz = model.omega[0] / (2.0 * np.pi)
+    to_targets = lagrange_matrix((model.freq_hz - first_node_hz) / model.grid_hz, model.n_freq)
+    return apply(to_targets, at_nodes)
+
+
+def pairs(A: np.ndarray, left: np.ndarray, right: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """(q,) ``Σ_k c_k Re tr(A_k L_k A_k R_k)`` per direction (``left``, ``right``: (K, k, k))."""
+    return np.einsum("qkab,qkba,k->q", A @ left[None], A @ right[None], counts).real
+
+
+def stretched_factors(objective: FullWhittle, theta: np.ndarray, A: np.ndarray, total: np.ndarray,
+                      kurtosis: np.ndarray, stretches: Stretches) -> np.ndarray:
+    """(q,) the factors on the model's variances of the directions whose kernels are ``A``
+    (``total`` their model variance ``Σ tr(A S A S)``), from the stretches' own spectra and the
+    road's intermittency left in the samples' ``kurtosis`` (k,) (module docstring); at least 1."""
+    model = objective.model
+    counts = objective.counts
+    parts = road_parts(objective, theta, stretches.parts)  # (G, K, k, k)
+    noise = np.eye(model.k) * (np.exp(theta[model.noise_slice]) + model.min_noise_psd)
+    local = parts / stretches.time[:, None, None, None]  # Ŝ_g's road part
+    unmasked = float(stretches.time.sum())
+    local_noise = noise / unmasked  # the masked samples are zeroed, noise and all
+    kappa = _road_kappa(local, local_noise, counts, kurtosis, stretches.flat)
+    n = local_noise[None]
+    noise_pairs = pairs(A, n, n, counts)
+    varied = sum(w * (kappa * pairs(A, r, r, counts) + 2.0 * pairs(A, r, n, counts) + noise_pairs)
+                 for w, r in zip(stretches.fourth, local, strict=True))
+    road = parts.sum(axis=0)
+    steady = pairs(A, road, road, counts) + 2.0 * pairs(A, road, noise[None], counts) + \
+        pairs(A, noise[None], noise[None], counts)
+    return np.maximum(1.0, 1.0 + (varied - steady) / np.where(total > 0, total, np.inf))
+
+
+def _road_kappa(local: np.ndarray, local_noise: np.ndarray, counts: np.ndarray, kurtosis: np.ndarray,
+                flat: np.ndarray) -> float:
+    """The road's own intermittency: each channel's ``E[x⁴]/3 = κ E_u[P²] + 2 E_u[P] N + E_u[1] N²``
+    solved for ``κ`` (``P`` the stretch's road power, ``N`` the noise's), pooled with the road's
+    share squared; at least 1."""
+    power = np.einsum("gkcc,k->gc", local, counts).real  # (G, k) each stretch's road power
+    n = np.einsum("cc->c", local_noise).real * counts.sum()
+    mean_x2 = flat @ (power + n)
+    road2 = flat @ (power * power)
+    if not np.all(road2 > 0) or not np.all(mean_x2 > 0):
+        return 1.0
+    per_channel = (kurtosis / 3.0 * mean_x2**2 - 2.0 * (flat @ power) * n - flat.sum() * n * n) / road2
+    weights = ((flat @ power) / mean_x2) ** 2
+    return float(max(1.0, np.sum(weights * per_channel) / weights.sum()))
+
+
+__all__ = ["GROUPS", "Stretches", "drive_stretches", "pairs", "road_parts", "stretched_factors"]
