@@ -2,46 +2,26 @@
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from rozyn_estimator.method.full.uncertainty.calibrate import VehicleCalibration
 from rozyn_estimator.method.likelihood.fitcheck import ModelFit
 from rozyn_estimator.method.likelihood.score import SandwichRatio
+from rozyn_estimator.method.refinement import LikelihoodResult
 
 
 @dataclass(frozen=True)
-class FullRefinement:
-    """Result of the full car's likelihood refinement. ``params``/``covariance`` None unless ok."""
+class FullRefinement(LikelihoodResult):
+    """Result of the full car's likelihood refinement: ``params`` (5,) in FULL_PARAM_NAMES order,
+    ``contributions`` per 1 u of each assumed value (5,)."""
 
-    status: str  # "ok" | "failed"
-    reason: str = ""
-    params: np.ndarray | None = None  # (5,) in FULL_PARAM_NAMES order
-    covariance: np.ndarray | None = None  # (5, 5) the statistical part (the sandwich, the road's factors)
-    theta: np.ndarray | None = None  # all fitted parameters (names in ``names``)
-    names: tuple[str, ...] = ()
-    neg_log_likelihood: float = math.nan  # ℓ at the optimum (constant terms dropped)
-    iterations: int = 0
-    starts: int = 0
-    band_hz: tuple[float, float] = (math.nan, math.nan)
-    noise_std_mps2: tuple[float, ...] = ()  # fitted white sensor noise per channel
-    waviness: float = 2.0
     coherence_scale: float = 1.0  # the tracks' fitted separation over the front track
-    contributions: dict[str, np.ndarray] = field(default_factory=dict)  # assumed value -> (5,) per 1 u
     budget_theta: np.ndarray | None = None  # the body parameters θ[:5] the contributions were taken at
-    variance_factors: tuple[float, ...] = ()  # the non-stationary road's factors on the model's variances
-    sandwich: SandwichRatio | None = None  # the taper's sandwich over the model's std (.score), where taken
     calibration: VehicleCalibration | None = None  # the sensors and corners as the data calibrated them
-    model_fit: ModelFit | None = None  # the goodness-of-fit check (.fitcheck)
-    information_lost: tuple[tuple[float, ...], ...] = ()  # per channel, per parameter (method.information)
-    elapsed_ms: float = 0.0
-    notes: tuple[str, ...] = ()
-
-    @property
-    def ok(self) -> bool:
-        return self.status == "ok"
+    sandwich: SandwichRatio | None = None  # the taper's sandwich over the model's std, where taken
+    model_fit: ModelFit | None = None  # the goodness-of-fit check
 
     def to_dict(self) -> dict[str, object]:
         return {"status": self.status, "reason": self.reason,

@@ -35,7 +35,7 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -60,6 +60,7 @@ from rozyn_estimator.method.likelihood.uncertainty.augment import plan
 from rozyn_estimator.method.likelihood.uncertainty.budget import uncertainty
 from rozyn_estimator.method.likelihood.uncertainty.calibration import Calibration
 from rozyn_estimator.method.likelihood.uncertainty.sensitivity import Sensitivities
+from rozyn_estimator.method.refinement import LikelihoodResult
 from rozyn_estimator.vehicle import Vehicle
 
 StartStd = np.ndarray | Callable[[], np.ndarray | None] | None
@@ -69,35 +70,16 @@ _CLOSE = 0.25  # the guard: a result this close to the start (share of it) agree
 
 
 @dataclass(frozen=True)
-class Refinement:
-    """Result of the likelihood refinement. ``params``/``covariance`` None unless ok."""
+class Refinement(LikelihoodResult):
+    """Result of the half car's likelihood refinement: ``params`` (m [kg], I [kg m²], lf [m]),
+    ``contributions`` per 1 u of each assumed value (3,)."""
 
-    status: str  # "ok" | "failed"
-    reason: str = ""
-    params: np.ndarray | None = None  # (m [kg], I [kg m²], lf [m])
-    covariance: np.ndarray | None = None  # (3, 3)
-    theta: np.ndarray | None = None  # all fitted parameters (names in ``names``)
-    names: tuple[str, ...] = ()
-    neg_log_likelihood: float = math.nan  # ℓ at the optimum (constant terms dropped)
-    iterations: int = 0
-    starts: int = 0
-    band_hz: tuple[float, float] = (math.nan, math.nan)
-    noise_std_mps2: tuple[float, float] = (math.nan, math.nan)  # fitted white sensor noise
-    waviness: float = 2.0
+    noise_std_mps2: tuple[float, ...] = (math.nan, math.nan)  # fitted white sensor noise, front and rear
     suspension_scale: tuple[float, ...] = ()  # fitted (k_s f, k_s r, c_s f, c_s r) / nominal
-    variance_factors: tuple[float, ...] = ()  # (m, I, lf) variances / the model sandwich's
     calibration: tuple[Calibration, ...] = ()  # the values the data calibrated
-    model_fit: ModelFit | None = None  # the goodness-of-fit check
-    contributions: dict[str, np.ndarray] = field(default_factory=dict)  # assumed value -> (3,) per 1 u
     sensitivities: Sensitivities | None = None  # of the values left assumed, where they were taken
-    sandwich: SandwichRatio | None = None  # the model sandwich's ratio, where it was taken
-    information_lost: tuple[tuple[float, ...], ...] = ()  # per channel, per parameter (method.information)
-    elapsed_ms: float = 0.0
-    notes: tuple[str, ...] = field(default=())
-
-    @property
-    def ok(self) -> bool:
-        return self.status == "ok"
+    sandwich: SandwichRatio | None = None  # the taper's sandwich over the model's std, where taken
+    model_fit: ModelFit | None = None  # the goodness-of-fit check
 
     def to_dict(self) -> dict[str, object]:
         out: dict[str, object] = {
