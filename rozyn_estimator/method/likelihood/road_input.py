@@ -7,6 +7,7 @@ from __future__ import annotations
 import copy
 import functools
 import hashlib
+import threading
 from collections import OrderedDict
 
 import numpy as np
@@ -198,6 +199,7 @@ def road_mixture(omega: np.ndarray, wheelbase_m: float, speed_mps: np.ndarray,
 
 _MIXTURES: OrderedDict[bytes, TrackMixture] = OrderedDict()
 _MIXTURES_KEPT = 4  # a window's model and its variants (the budget's, the calibration's) share one
+_MIXTURES_LOCK = threading.Lock()
 
 
 def track_mixture(omega: np.ndarray, wheelbase_m: float, track_m: float, speed_mps: np.ndarray,
@@ -208,13 +210,15 @@ def track_mixture(omega: np.ndarray, wheelbase_m: float, track_m: float, speed_m
     for part in (omega, speed_mps, sample_weights, (wheelbase_m, track_m, max_cpm, fs_hz)):
         digest.update(b"-" if part is None else np.ascontiguousarray(part, dtype=float).tobytes())
     key = digest.digest()
-    if key in _MIXTURES:
-        _MIXTURES.move_to_end(key)
-        return _MIXTURES[key]
+    with _MIXTURES_LOCK:  # updates may run on several threads (the node's, a replay's)
+        if key in _MIXTURES:
+            _MIXTURES.move_to_end(key)
+            return _MIXTURES[key]
     mix = TrackMixture(omega, wheelbase_m, track_m, speed_mps, sample_weights, max_cpm, fs_hz)
-    _MIXTURES[key] = mix
-    while len(_MIXTURES) > _MIXTURES_KEPT:
-        _MIXTURES.popitem(last=False)
+    with _MIXTURES_LOCK:
+        _MIXTURES[key] = mix
+        while len(_MIXTURES) > _MIXTURES_KEPT:
+            _MIXTURES.popitem(last=False)
     return mix
 
 
