@@ -62,6 +62,11 @@ def test_a_mixture_sums_its_delays_exactly_and_is_built_once_per_drive():
     assert track_mixture(omega, 2.8, 1.5, speed.copy(), None, 5.0, 100.0) is mix  # the model's variants
     assert track_mixture(omega, 2.8, 1.5, speed * 1.01, None, 5.0, 100.0) is not mix
     assert track_mixture(omega, 2.9, 1.5, speed, None, 5.0, 100.0) is not mix  # the budget's wheelbase
+    groups = np.arange(mix.tau.size) // 16  # four stretches of the delays: their parts sum to the whole
+    parts = [mix.part(groups == g) for g in range(4)]
+    np.testing.assert_allclose(sum(p.share for p in parts), mix.share, rtol=1e-12)
+    np.testing.assert_allclose(sum(p.phi for p in parts), mix.phi, rtol=0.0, atol=1e-12)
+    np.testing.assert_allclose(sum(p.coherence(1.3)[0] for p in parts), mix.coherence(1.3)[0], atol=1e-12)
 
 
 def test_steady_stretches_are_ramped_in_and_out():
