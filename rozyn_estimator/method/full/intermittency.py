@@ -72,22 +72,32 @@ def intermittency_factors(objective: FullWhittle, theta: np.ndarray, combos: np.
                           stretches: Stretches | None = None) -> np.ndarray:
     """(q,) per direction: ``1 + (κ - 1) ρ``, ``κ`` the road's intermittency
     (:func:`road_intermittency`), ``ρ`` the share of the direction's score variance that is
-    the road's alone, ``Σ tr(A S_r A S_r) / Σ tr(A S A S)`` (module docstring); on a varying
-    drive's ``stretches``, each stretch's own spectrum (:func:`.stretches.stretched_factors`)."""
+    the road's alone, ``Σ tr(A S_r A S_r) / Σ tr(A S A S)`` (module docstring). On a varying
+    drive's ``stretches`` the larger of that and each stretch's own spectrum's
+    (:func:`.stretches.stretched_factors`): two measures, each blind where the other sees.
+    The stretches see how each parameter's information moves with the speed (the roll's at
+    low speed); the samples' kurtosis, which the speed's envelope and the masked zeros raise
+    for every parameter alike, also sees what the model of stretches lacks: the square gates'
+    edges, which cut the body's response mid-swing. Measured on urban windows (12 roads, 144
+    windows, exact vehicle), the larger covered the truth 98 / 92 / 98 / 97 / 92 % (m, I_xx,
+    I_yy, l_f, y_c) with four corners, where the kurtosis alone gave 98 / 88 / 98 / 97 / 90 and
+    the stretches alone 97 / 92 / 94 / 92 / 92; one IMU 98 / 91 / 88 / 91 / 89 % (the kurtosis
+    alone 98 / 87 / 88 / 91 / 86)."""
     m4 = channel_kurtosis(samples, taper)
     if m4 is None:
         return np.ones(combos.shape[0])
     A = objective.score_kernels(theta, combos)
     S, _ = objective.factored(theta)
     total = pairs(A, S, S, objective.counts)
-    if stretches is not None:
-        return stretched_factors(objective, theta, A, total, m4, stretches)
     kappa = _pooled(*channel_intermittency(m4, noise_share))
-    if kappa <= 1.0:
-        return np.ones(combos.shape[0])
-    road = road_itself(objective, theta)
-    share = np.clip(pairs(A, road, road, objective.counts) / np.where(total > 0, total, np.inf), 0.0, 1.0)
-    return 1.0 + (kappa - 1.0) * share
+    steady = np.ones(combos.shape[0])
+    if kappa > 1.0:
+        road = road_itself(objective, theta)
+        share = np.clip(pairs(A, road, road, objective.counts) / np.where(total > 0, total, np.inf), 0.0, 1.0)
+        steady = 1.0 + (kappa - 1.0) * share
+    if stretches is None:
+        return steady
+    return np.maximum(steady, stretched_factors(objective, theta, A, total, m4, stretches))
 
 
 def road_itself(objective: FullWhittle, theta: np.ndarray) -> np.ndarray:
