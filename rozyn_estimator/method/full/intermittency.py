@@ -34,9 +34,9 @@ over the estimates' rms error was 1.09 on average and 20 of the 150 coverages we
 are few).
 
 The factors are one per parameter, applied to the variances (the correlations stay). On a
-varying drive each stretch of the window at its own speed has its own spectrum, and the
-factors come from those (:mod:`.stretches`), the road's intermittency multiplying each
-stretch's road part.
+varying drive each stretch of the window at its own speed has its own spectrum; the factors
+are the larger of this module's and the stretches' (:mod:`.stretches`, the road's
+intermittency multiplying each stretch's road part).
 """
 
 from __future__ import annotations

@@ -14,8 +14,9 @@ frequency ``f / v``), the mass from the heave, whose power falls with the speed.
 samples the model masks (standing, pulling away: their data are zeroed) carry nothing, so a
 window masked in part counts the rest for more. Measured on urban windows (the full car, 12
 roads, exact vehicle) with one road intermittency factor for every parameter (the samples'
-kurtosis, which the speed's envelope raises to about 1.9): the mass's std was 1.25 times its
-spread, the roll inertia's and the lateral CoG's 0.78.
+kurtosis, which the speed's envelope raises to about 1.9): the mass's std was 1.19 times the
+error's rms, the roll inertia's 0.77 and the lateral CoG's 0.79. :mod:`.intermittency`
+publishes the larger of that factor and these.
 
 The road's own intermittency (:mod:`.intermittency`) multiplies each stretch's road part:
 the samples' kurtosis is compared with what the stretches' powers alone give
