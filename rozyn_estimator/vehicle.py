@@ -124,6 +124,15 @@ class Vehicle:
         return ("accel_z", "gyro_y" if self.pitch_gyro else "accel_z")
 
     @property
+    def channel_late(self) -> tuple[bool, bool]:
+        """Each channel runs on the clock the timing tolerance (``sensor_time_offset_s``) puts
+        late: the rear sensor's, or a block's second sensor's (one IMU: neither)."""
+        if self.sensors is None:
+            return (False, True)
+        first, second = self.channels
+        return (False, second.sensor != first.sensor)
+
+    @property
     def pitch_gyro(self) -> bool:
         """The second channel is a pitch gyro (``gyro_y``), not an accelerometer (a valid block with
         a gyro_y has it there: :func:`~rozyn_estimator.sensors.half_car_channels`)."""

@@ -59,7 +59,7 @@ from rozyn_estimator.method.full.intermittency import variance_factors
 from rozyn_estimator.method.full.means import GROUP_HZ, coarse_fit, grouped, kernel_m2
 from rozyn_estimator.method.full.result import FullRefinement
 from rozyn_estimator.method.full.score import sandwich_ratio
-from rozyn_estimator.method.full.spectrum import BODY_NAMES, FullCarSpectrum
+from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.full.speed import check_full_speed, speed_models
 from rozyn_estimator.method.full.uncertainty.calibrate import (
     HANDOFF,
@@ -258,7 +258,9 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         notes += [f"speed check: {told.text()}"] if told.doubtful else []
     # uncalibrated values move from the model's vehicle; a misfit's corner calibration absorbed
     # structure (dampers stiffer in rebound moved l_f by 2 std): their first-order budget stands
-    contributions, budget_theta = _contributions(objective, theta, theta_cov, model.vehicle, warm,
+    assumed_now = model.vehicle
+    assert isinstance(assumed_now, FullVehicle)  # the half car's budget: its own refinement's
+    contributions, budget_theta = _contributions(objective, theta, theta_cov, assumed_now, warm,
                                                  calibration, fit is not None and not fit.ok)
     # the calibration's step completes the fit's convergence (the half car's tol_calibrated)
     if objective.decrement(theta) >= (cfg.tol if calibration is None else cfg.tol_calibrated) or \
@@ -372,7 +374,7 @@ def _sandwich(objective: FullWhittle, theta: np.ndarray, combos: np.ndarray, mod
     if previous is not None and previous.holds(theta, spectra.n_samples, context):
         return previous
     return SandwichRatio(sandwich_ratio(objective, theta, combos, model_cov, spectra), theta.copy(),
-                         spectra.n_samples, len(BODY_NAMES), context)
+                         spectra.n_samples, objective.model.n_body, context)
 
 
 __all__ = ["FullRefinement", "refine_full", "ridged"]

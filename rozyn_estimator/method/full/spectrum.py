@@ -1,9 +1,8 @@
-"""The full car's spectral model: :class:`FullCarSpectrum` (the k×k spectral matrix of three
-or four body accelerometers driven by two coherent road tracks, its parameters θ and dS/dθ).
-
-The half car's model carried to the whole body. Each corner is its suspension (with the
-anti-roll bars: :func:`rozyn_estimator.method.full.fit.corner_matrices`) on its wheel on its
-tyre; condensing the wheels exactly, the corners push on the body with
+"""The vehicle's spectral model: :class:`FullCarSpectrum` (the k×k spectral matrix of the body's
+channels driven by the road, its parameters θ and dS/dθ), for the full car and the half car (its
+two corners on the centreline, one track, no roll: ``q = (z₀, φ)``). Each corner is its
+suspension (with the anti-roll bars: :func:`~rozyn_estimator.method.full.fit.corner_matrices`)
+on its wheel on its tyre; condensing the wheels exactly, the corners push on the body with
 ``F = -Z(ω) x_c + T(ω) u`` (4×4 each, known). The body's coordinates are taken
 at the front axle's centre, ``q = (z₀, φ, θ)``: a point ``(x, y)`` moves
 ``z₀ - x φ + y θ`` (``B`` for the corners, ``P`` for the sensors), the centre of gravity ``t·q``
@@ -32,10 +31,11 @@ from typing import Any
 
 import numpy as np
 from numpy.polynomial import legendre
-from scipy import sparse, special
+from scipy import sparse
 
-from rozyn_estimator.body_model import channel_rows
-from rozyn_estimator.gravity import gravity_height_m, rotation_inertia_kgm2, rotation_stiffness_nmprad
+from rozyn_estimator.body_model import AnyVehicle, channel_rows, corners_of, rolls
+from rozyn_estimator.gravity import gravity_height_m
+from rozyn_estimator.method.body_parameters import BodyParameters
 from rozyn_estimator.method.full.fit import corner_matrices, corner_response_derivatives
 from rozyn_estimator.method.full.grid import ALIAS_SPACING_HZ, alias_map, apply, evaluation_map
 from rozyn_estimator.method.full.uncertainty import sensing as sensor_model
@@ -49,19 +49,13 @@ from rozyn_estimator.method.likelihood.road_input import (
 )
 from rozyn_estimator.vehicle_full import FullVehicle
 
-_CORNER_FIELDS = ("wheelbase_m", "track_front_m", "track_rear_m", "unsprung_mass_kg", "tyre_stiffness_npm",
-                  "tyre_damping_nspm", "suspension_stiffness_npm", "suspension_damping_nspm",
-                  "anti_roll_stiffness_front_nmprad", "anti_roll_stiffness_rear_nmprad", "cog_height_m",
-                  "wheel_centre_height_m")
-BODY_NAMES = ("ln_mass", "ln_roll_inertia", "ln_pitch_inertia", "logit_cog", "cog_lateral_m")
-
 
 class FullCarSpectrum:
-    """The full car's spectral matrix and its derivatives on the band's Fourier frequencies.
+    """The vehicle's spectral matrix and its derivatives on the band's Fourier frequencies.
 
     Args:
-        vehicle: the known corners, bars, geometry and sensor positions.
-        sensors: the corner index (0..3, FL FR RL RR) of each channel's accelerometer.
+        vehicle: the known corners, bars, geometry and sensor positions (either car).
+        sensors: the vehicle's channel (its ``channel_kinds`` index) of each column.
         freq_hz: (K,) the frequencies [Hz].
         fs_hz: sample rate [Hz] (for the aliasing terms).
         speed_mps: the speed, constant or per sample [m/s]; per sample, ``sample_weights`` are
@@ -83,7 +77,7 @@ class FullCarSpectrum:
             :func:`.sensing.parameter_names`' values for every group; None: none).
     """
 
-    def __init__(self, vehicle: FullVehicle, sensors: Sequence[int], freq_hz: np.ndarray, fs_hz: float,
+    def __init__(self, vehicle: AnyVehicle, sensors: Sequence[int], freq_hz: np.ndarray, fs_hz: float,
                  speed_mps: float | np.ndarray, aliases: int = 1, f_ref_hz: float = 3.0,
                  road_shape_terms: int = 2, min_noise_psd: np.ndarray | None = None,
                  shape_edges_hz: tuple[float, float] | None = None,
@@ -125,16 +119,21 @@ class FullCarSpectrum:
         self.shape_basis = np.array([legendre.legval(x, np.eye(road_shape_terms + 2)[d])
                                      for d in range(2, road_shape_terms + 2)]).reshape(road_shape_terms, -1)
         self.min_noise_psd = np.zeros(self.k) if min_noise_psd is None else np.asarray(min_noise_psd, float)
-        self.names = [*BODY_NAMES, "ln_road", "waviness", *[f"road_shape_{d}" for d in
-                                                           range(2, road_shape_terms + 2)],
-                      "ln_coherence_scale", *[f"ln_noise_{i}" for i in range(self.k)]]
+        self.rolls = rolls(vehicle)  # two tracks and the body's roll, or the half car's one track
+        self.wheelbase_m = vehicle.wheelbase_m  # l_f's scale in θ: kept when the budget moves the vehicle
+        self.body = BodyParameters(self.wheelbase_m, self.rolls)
+        self.n_body = nb = self.body.size
+        shapes = [f"road_shape_{d}" for d in range(2, road_shape_terms + 2)]
+        self.names = [*self.body.names, "ln_road", "waviness", *shapes, *(["ln_coherence_scale"] if self.rolls
+                                                                          else []),
+                      *[f"ln_noise_{i}" for i in range(self.k)]]
         self.noise_slice = slice(len(self.names) - self.k, len(self.names))
         self.names += sensor_model.parameter_names(self.calibrate, self.k)
         self.calibration_slice = slice(self.noise_slice.stop, len(self.names))
         self.index = {name: i for i, name in enumerate(self.names)}
         self.n_params = len(self.names)
-        self.shape_slice = slice(7, 7 + road_shape_terms)
-        self.wheelbase_m = vehicle.wheelbase_m  # l_f's scale in θ: kept when the budget moves the vehicle
+        self.road_index, self.waviness_index = nb, nb + 1
+        self.shape_slice = slice(nb + 2, nb + 2 + road_shape_terms)
         self._body_key: bytes | None = None  # body_motion's cache
         self._body_value: tuple[np.ndarray, ...] | None = None
         self.set_vehicle(vehicle)
@@ -172,32 +171,37 @@ class FullCarSpectrum:
                                                  self.k)
         self.sensing = self.sensing_of(self.vehicle)
 
-    def set_vehicle(self, vehicle: FullVehicle, channel_factor: np.ndarray | None = None) -> None:
+    def set_vehicle(self, vehicle: AnyVehicle, channel_factor: np.ndarray | None = None) -> None:
         """(Re)compute what depends on the assumed vehicle and sensors; ``channel_factor``
         (k,) or (F, k) multiplies each channel's response (a sensor's gain or delay)."""
         v = self.vehicle = vehicle
         w = self.omega
-        corners = tuple(getattr(v, name) for name in _CORNER_FIELDS)
+        c = corners_of(v)
+        track_m = v.track_front_m if isinstance(v, FullVehicle) else 0.0  # the tracks' coherence's scale
+        corners = (*(np.asarray(x).tobytes() for x in vars(c).values()), v.wheelbase_m, track_m,
+                   gravity_height_m(v))
         if corners != getattr(self, "_corners", None):  # the sensors alone moved: the corners stand
             self._corners, self._body_key = corners, None
-            Z, T = self.corner_impedance = corner_matrices(v, 1j * w)  # (F, 4, 4) each
-            B = self.body_map = np.column_stack([np.ones(4), -np.array(v.corner_x_m), np.array(v.corner_y_m)])
+            Z, T = self.corner_impedance = corner_matrices(v, 1j * w)  # (F, c, c) each
+            B = self.body_map = np.column_stack([np.ones(c.count), -c.x_m, c.y_m])[:, : self.body.coordinates]
             self.body_stiffness = B.T @ Z @ B  # Bᵀ Z B
             self.body_input = B.T @ T  # Bᵀ T
             self.gravity_height_m = gravity_height_m(v)
-            self.unsprung_total_kg = float(sum(v.unsprung_mass_kg))
+            self.unsprung_total_kg = float(c.unsprung_mass_kg.sum())
+            self.body = BodyParameters(self.wheelbase_m, self.rolls, self.gravity_height_m,
+                                       self.unsprung_total_kg)
             speeds = np.asarray(self.speed_mps)
-            self.mixture = track_mixture(w, v.wheelbase_m, v.track_front_m, speeds, self.sample_weights,
+            self.mixture = track_mixture(w, v.wheelbase_m, track_m, speeds, self.sample_weights,
                                          self.road_max_cpm, self.fs_hz) if self.varying else None
             share, phi = (self.mixture.share, self.mixture.phi) if self.mixture is not None else \
                 (np.ones(w.shape), delay_characteristic(w, v.wheelbase_m, self.speed_mps))
             speed = driving_speed(self.speed_mps, self.sample_weights)  # the budget's coherence
-            self.x_coherence = 2.0 * np.pi * np.abs(w / (2.0 * np.pi)) / speed * v.track_front_m
+            self.x_coherence = 2.0 * np.pi * np.abs(w / (2.0 * np.pi)) / speed * track_m
             self.delay = np.stack([share, phi.conj(), phi, share], axis=-1).reshape(-1, 2, 2)
         self.sensing = self.sensing_of(v, channel_factor)
 
     @contextlib.contextmanager
-    def assuming(self, vehicle: FullVehicle, channel_factor: np.ndarray | None = None) -> Iterator[None]:
+    def assuming(self, vehicle: AnyVehicle, channel_factor: np.ndarray | None = None) -> Iterator[None]:
         """Within the block the model assumes ``vehicle`` (and ``channel_factor``, as
         :meth:`set_vehicle`); after it, its own again as it was (kept, not recomputed)."""
         saved = dict(self.__dict__)
@@ -208,8 +212,8 @@ class FullCarSpectrum:
             self.__dict__.clear()
             self.__dict__.update(saved)
 
-    def sensing_of(self, v: FullVehicle, channel_factor: np.ndarray | None = None) -> np.ndarray:
-        """iω P (F, k, 3): the sensors' accelerations from the body's velocities (q̇) (a gyro's
+    def sensing_of(self, v: AnyVehicle, channel_factor: np.ndarray | None = None) -> np.ndarray:
+        """iω P (F, k, b): the sensors' accelerations from the body's velocities (q̇) (a gyro's
         rate: P), each channel times its ``channel_factor`` (k,) or (F, k)."""
         w = self.omega
         P, rate = channel_rows(v, self.sensors)  # a gyro reads q̇ itself, not iω q̇
@@ -229,46 +233,32 @@ class FullCarSpectrum:
 
     # --- parameters -------------------------------------------------------------------
     def theta(self, params: np.ndarray, road: float, noise: np.ndarray) -> np.ndarray:
-        """θ from (m, I_xx, I_yy, l_f, y_c), the road intensity σ² and the noise floors (k,)."""
-        m, ixx, iyy, lf, yc = params
-        p = lf / self.wheelbase_m
+        """θ from the body's parameters (:class:`BodyParameters`: the full car's (m, I_xx,
+        I_yy, l_f, y_c), the half car's (m, I_yy, l_f)), the road intensity σ² and the noise
+        floors (k,)."""
         th = np.zeros(self.n_params)
-        th[:6] = [math.log(m), math.log(ixx), math.log(iyy), math.log(p / (1 - p)), yc, math.log(road)]
-        th[6] = 2.0
+        th[: self.n_body] = self.body.theta(np.asarray(params, dtype=float))
+        th[self.road_index], th[self.waviness_index] = math.log(road), 2.0
         th[self.noise_slice] = np.log(noise)
         return th
 
     def physical(self, theta: np.ndarray) -> np.ndarray:
-        """(m [kg], I_xx, I_yy [kg m²], l_f, y_c [m]) from θ."""
-        with np.errstate(over="ignore"):
-            return np.array([*np.exp(theta[:3]), special.expit(theta[3]) * self.wheelbase_m, theta[4]])
+        """The body's parameters [kg, kg m², m] from θ (:class:`BodyParameters`' order)."""
+        return self.body.physical(theta)
 
     def physical_jacobian(self, theta: np.ndarray) -> np.ndarray:
-        """(5, n_params) d(m, I_xx, I_yy, l_f, y_c)/dθ."""
-        m, ixx, iyy, lf, _ = self.physical(theta)
-        p = lf / self.wheelbase_m
-        jac = np.zeros((5, self.n_params))
-        jac[:5, :5] = np.diag([m, ixx, iyy, self.wheelbase_m * p * (1 - p), 1.0])
+        """(n_body, n_params) d(the body's parameters)/dθ."""
+        jac = np.zeros((self.n_body, self.n_params))
+        jac[:, : self.n_body] = self.body.jacobian(theta)
         return jac
 
     def _mass_matrix(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """M (3, 3) and dM/dθ (5, 3, 3); the wheels' swing ``μ h²`` adds to both rotations'."""
-        m, ixx, iyy, lf, yc = self.physical(theta)
-        t = np.array([1.0, -lf, yc])
-        tt = np.outer(t, t)
-        swing, d_swing = rotation_inertia_kgm2(m, self.gravity_height_m, self.unsprung_total_kg)
-        M = m * tt + np.diag([0.0, iyy + swing, ixx + swing])
-        d_lf, d_yc = np.outer([0.0, -1.0, 0.0], t), np.outer([0.0, 0.0, 1.0], t)
-        p = lf / self.wheelbase_m
-        dM = np.array([m * tt + np.diag([0.0, d_swing, d_swing]), np.diag([0.0, 0.0, ixx]),
-                       np.diag([0.0, iyy, 0.0]), m * (d_lf + d_lf.T) * self.wheelbase_m * p * (1 - p),
-                       m * (d_yc + d_yc.T)])
-        return M, dM
+        """M (b, b) and dM/dθ (n_body, b, b); the wheels' swing ``μ h²`` adds to the rotations'."""
+        return self.body.mass_matrix(theta)
 
     def gravity_stiffness(self, theta: np.ndarray) -> np.ndarray:
-        """The weight's stiffness ``-m g h`` on pitch and roll (3, 3), also its ln m derivative."""
-        k = rotation_stiffness_nmprad(math.exp(theta[0]), self.gravity_height_m)
-        return np.diag([0.0, k, k])
+        """The weight's stiffness ``-m g h`` on the rotations (b, b), also its ln m derivative."""
+        return self.body.gravity_stiffness(theta)
 
     # --- the model ----------------------------------------------------------------------
     def spectrum(self, theta: np.ndarray, derivatives: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
@@ -322,12 +312,15 @@ class FullCarSpectrum:
         shape = self.shape_basis.shape[0]
         folded = self.fold(np.concatenate([
             part, -self.log_shape[None, :, None, None] * per_alias,
-            self.shape_basis[:, :, None, None] * per_alias, (sensing @ d_motion @ herm(sensing))[None]]))
-        dS[:5] = folded[:5]
-        dS[:5] += herm(dS[:5])
-        dS[5] = S_road
-        dS[6: 7 + shape] = folded[5: 6 + shape]
-        dS[self.index["ln_coherence_scale"]] = folded[6 + shape]
+            self.shape_basis[:, :, None, None] * per_alias,
+            *([(sensing @ d_motion @ herm(sensing))[None]] if self.rolls else [])]))
+        nb = self.n_body
+        dS[:nb] = folded[:nb]
+        dS[:nb] += herm(dS[:nb])
+        dS[nb] = S_road
+        dS[nb + 1: nb + 2 + shape] = folded[nb: nb + 1 + shape]
+        if self.rolls:
+            dS[self.index["ln_coherence_scale"]] = folded[nb + 1 + shape]
         for i in range(self.k):
             dS[self.noise_slice.start + i, :, i, i] = noise[i]
         if self.calibrate:
@@ -376,10 +369,15 @@ class FullCarSpectrum:
         inv_d = np.linalg.inv(self.body_stiffness + self.gravity_stiffness(theta)
                               - (self.omega**2)[:, None, None] * M)
         H = inv_d @ self.body_input
+        weight = self.road_weight(theta)[:, None, None]
+        if not self.rolls:  # one track: the axles' delay alone
+            inputs = weight * self.delay
+            motion = H @ inputs @ herm(H)
+            self._body_key, self._body_value = key, (inv_d, H, inputs, motion, np.zeros_like(motion))
+            return self._body_value
         scale = math.exp(theta[self.index["ln_coherence_scale"]])
         gamma, d_gamma = self.mixture.coherence(scale) if self.mixture is not None else \
             track_coherence(self.x_coherence * scale)
-        weight = self.road_weight(theta)[:, None, None]
         inputs = weight * self.road_inputs(gamma)
         motion = H @ inputs @ herm(H)
         d_motion = H @ (weight * self.road_inputs(d_gamma, diagonal=0.0)) @ herm(H)
@@ -389,7 +387,8 @@ class FullCarSpectrum:
     def road_weight(self, theta: np.ndarray) -> np.ndarray:
         """``r σ²`` (F,): the road velocity's spectrum at the evaluation frequencies."""
         shape = theta[self.shape_slice] @ self.shape_basis if self.shape_basis.size else 0.0
-        return self.alias_road * np.exp(theta[5] + (2.0 - theta[6]) * self.log_shape + shape)
+        waviness = theta[self.waviness_index]
+        return self.alias_road * np.exp(theta[self.road_index] + (2.0 - waviness) * self.log_shape + shape)
 
     def road_inputs(self, gamma: np.ndarray, diagonal: float = 1.0,
                     delay: np.ndarray | None = None) -> np.ndarray:

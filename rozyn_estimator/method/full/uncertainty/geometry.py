@@ -27,6 +27,7 @@ import numpy as np
 
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum, herm
 from rozyn_estimator.method.likelihood.road_input import delay_slope, track_coherence
+from rozyn_estimator.vehicle_full import FullVehicle
 
 GEOMETRY = ("wheelbase_m", "track_front_m", "track_rear_m")
 _BAR = {"track_front_m": (20, "anti_roll_stiffness_front_nmprad"),
@@ -37,6 +38,8 @@ def geometry_derivatives(model: FullCarSpectrum, theta: np.ndarray, keys: Sequen
     """dS (G, nodes, k, k) at θ per metre of each of ``keys`` (of :data:`GEOMETRY`); on a varying
     drive (the road's mixture over the window's delays and speeds) by central differences."""
     v = model.vehicle
+    if not isinstance(v, FullVehicle):
+        raise TypeError("the geometry's derivatives are the full car's (the half car's budget is its own)")
     if model.mixture is not None:
         return np.array([_difference(model, theta, key) for key in keys])
     inv_d, H, inputs, _, d_motion = model.body_motion(theta)

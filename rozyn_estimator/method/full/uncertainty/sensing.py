@@ -73,8 +73,8 @@ def unpack(values: np.ndarray, groups: Sequence[str], k: int) -> dict[str, np.nd
 
 def calibrated(sensing: np.ndarray, omega: np.ndarray, layout: ChannelLayout,
                values: dict[str, np.ndarray]) -> np.ndarray:
-    """(F, k, 3) the sensing with the sensors' departures ``values`` (:func:`unpack`)."""
-    moved = sensing + sensing[:, :, :1] * _position_shift(values)[None]
+    """(F, k, b) the sensing with the sensors' departures ``values`` (:func:`unpack`)."""
+    moved = sensing + sensing[:, :, :1] * _position_shift(values)[None, :, : sensing.shape[-1]]
     if np.any(values["turn"]):
         moved = moved + values["turn"][None, :, None] * _turning(sensing, layout)
     return _factor(omega, layout.late, values)[:, :, None] * moved
@@ -82,9 +82,9 @@ def calibrated(sensing: np.ndarray, omega: np.ndarray, layout: ChannelLayout,
 
 def derivatives(sensing: np.ndarray, omega: np.ndarray, layout: ChannelLayout, values: dict[str, np.ndarray],
                 groups: Sequence[str]) -> np.ndarray:
-    """(G, F, k, 3) d(sensing)/d(each calibrated value, as :func:`parameter_names`) at
+    """(G, F, k, b) d(sensing)/d(each calibrated value, as :func:`parameter_names`) at
     ``values``: ``sensing`` is the uncalibrated one (as :func:`calibrated`'s)."""
-    F, k, _ = sensing.shape
+    F, k, b = sensing.shape
     rear = layout.late
     factor = _factor(omega, rear, values)
     now = calibrated(sensing, omega, layout, values)
@@ -101,15 +101,16 @@ def derivatives(sensing: np.ndarray, omega: np.ndarray, layout: ChannelLayout, v
             rows += [_only_row(turning[:, i], i, k) for i in range(k)]
         else:
             moving = factor * sensing[:, :, 0]  # (F, k): each sensor's g e^(-iωτ) iω f
-            rows += [_only_row(moving[:, i, None] * _POSITION_ROWS[g][None], i, k) for i in range(k)]
-    return np.array(rows) if rows else np.zeros((0, F, k, 3), dtype=complex)
+            rows += [_only_row(moving[:, i, None] * _POSITION_ROWS[g][None, :b], i, k) for i in range(k)]
+    return np.array(rows) if rows else np.zeros((0, F, k, b), dtype=complex)
 
 
 def _turning(sensing: np.ndarray, layout: ChannelLayout) -> np.ndarray:
-    """(F, k, 3) ``f T`` per channel: a gyro's own factor (its sensing along its row P) times
-    the row its turn adds; zeros for an accelerometer."""
-    own = np.einsum("fkc,kc->fk", sensing, layout.turns[:, 0])
-    return own[:, :, None] * layout.turns[None, :, 1]
+    """(F, k, b) ``f T`` per channel: a gyro's own factor (its sensing along its row P) times
+    the row its turn adds; zeros for an accelerometer (and on a body that does not roll)."""
+    b = sensing.shape[-1]
+    own = np.einsum("fkc,kc->fk", sensing, layout.turns[:, 0, :b])
+    return own[:, :, None] * layout.turns[None, :, 1, :b]
 
 
 def _position_shift(values: dict[str, np.ndarray]) -> np.ndarray:
@@ -125,7 +126,7 @@ def _factor(omega: np.ndarray, rear: np.ndarray, values: dict[str, np.ndarray]) 
 
 
 def _only_row(row: np.ndarray, i: int, k: int) -> np.ndarray:
-    """(F, k, 3) zeros but sensor ``i``'s row ``row`` (F, 3)."""
-    out = np.zeros((row.shape[0], k, 3), dtype=complex)
+    """(F, k, b) zeros but sensor ``i``'s row ``row`` (F, b)."""
+    out = np.zeros((row.shape[0], k, row.shape[-1]), dtype=complex)
     out[:, i] = row
     return out
