@@ -1,5 +1,6 @@
-"""The full car's likelihood refinement: :func:`refine_full` (a window's maximum-likelihood
-``(m, I_xx, I_yy, l_f, y_c)`` and its covariance, as a :class:`FullRefinement`).
+"""The likelihood refinement: :func:`refine_full` (a window's maximum-likelihood body parameters,
+the full car's ``(m, I_xx, I_yy, l_f, y_c)`` or the half car's ``(m, I_yy, l_f)``, and their
+covariance, as a :class:`FullRefinement`).
 
 As the half car's (:mod:`rozyn_estimator.method.likelihood.fit`), started from Rozyn's stage
 of the full car: the negative Whittle log-likelihood (:mod:`.whittle`) of the window's
@@ -54,6 +55,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.optimize import OptimizeResult
 
+from rozyn_estimator.body_model import AnyVehicle, corners_of, rolls
 from rozyn_estimator.method.full.fitcheck import full_model_fit
 from rozyn_estimator.method.full.intermittency import variance_factors
 from rozyn_estimator.method.full.means import GROUP_HZ, coarse_fit, grouped, kernel_m2
@@ -79,7 +81,6 @@ from rozyn_estimator.method.likelihood.newton import aground
 from rozyn_estimator.method.likelihood.road_input import steady_window, unsteady
 from rozyn_estimator.method.likelihood.score import SandwichRatio
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, taper_window, window_spectra
-from rozyn_estimator.vehicle_full import FullVehicle
 
 _MIN_NOISE = 1e-9  # the model's fixed white floor, share of each channel's band power
 _FIRST_ITERATIONS = 25  # the first start's share of max_iter when a second may follow (noisy data: 3-15)
@@ -93,18 +94,19 @@ class _FitError(Exception):
 
 
 def refine_full(
-    accel_mps2: np.ndarray, fs_hz: float, vehicle: FullVehicle, sensors: Sequence[int],
+    accel_mps2: np.ndarray, fs_hz: float, vehicle: AnyVehicle, sensors: Sequence[int],
     start: np.ndarray | None, speed_mps: float | np.ndarray, config: LikelihoodConfig | None = None,
     warm: FullRefinement | None = None, spectra: Spectra | None = None,
 ) -> FullRefinement:
-    """Maximum-likelihood ``(m, I_xx, I_yy, l_f, y_c)`` of the full car from a window.
+    """Maximum-likelihood body parameters from a window (the full car's five, the half car's three).
 
     Args:
-        accel_mps2: (n, k) vertical accelerations of the ``sensors``' body points, finite.
+        accel_mps2: (n, k) the ``sensors``' channels, finite.
         fs_hz: sample rate [Hz].
-        vehicle: the known corners, bars, geometry and sensor positions.
-        sensors: the corner index (0..3: FL, FR, RL, RR) of each column's accelerometer.
-        start: (5,) the start, e.g. Rozyn's estimate; None for a coarse grid's best point.
+        vehicle: the known corners, bars, geometry and sensor positions (either car).
+        sensors: the vehicle's channel slot of each column (the full car's corners 0..3: FL, FR,
+            RL, RR; the half car's front and rear, 0 and 1).
+        start: the start, e.g. Rozyn's estimate; None for a coarse grid's best point.
         speed_mps: the speed [m/s], a number or one per sample.
         config: the refinement's settings (the half car's: band, taper, aliases, road shape,
             second start, noise share, iterations, tolerance).
@@ -125,7 +127,7 @@ def refine_full(
     return dataclasses.replace(result, elapsed_ms=(time.perf_counter() - started) * 1e3)
 
 
-def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, ...],
+def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, ...],
             start: np.ndarray | None, speed: float | np.ndarray, cfg: LikelihoodConfig,
             warm: FullRefinement | None, given: Spectra | None = None) -> FullRefinement:
     band = cfg.band_at(fs)
@@ -138,7 +140,9 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
     if spectra.freq_hz.size < 50:
         raise _FitError(f"too few frequencies in {band[0]:g}-{band[1]:g} Hz")
     power = band_power(spectra)
-    step = max(1, int(GROUP_HZ * y.shape[0] / fs + 1e-9))
+    # the full car's means over neighbouring bins save work; the half car's two channels are
+    # cheap per bin, and there the means cost 4 % of the mass' precision (measured)
+    step = max(1, int(GROUP_HZ * y.shape[0] / fs + 1e-9)) if rolls(vehicle) else 1
     freq, periodogram, counts = grouped(spectra.freq_hz, spectra.periodogram, step)
     kernel = kernel_m2(y.shape[0], fs, cfg.taper, counts)
     groups = sensor_groups(vehicle, sensors) if cfg.self_calibrate else ()
@@ -175,16 +179,17 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         a better basin may lie elsewhere)."""
         if best is None:
             return True
-        moved = np.abs(model.physical(best.x)[:3] / first_params[:3] - 1.0).max() > _CLOSE
+        scaled = slice(0, model.body.lf_index)  # the mass and the inertias
+        moved = np.abs(model.physical(best.x)[scaled] / first_params[scaled] - 1.0).max() > _CLOSE
         return bool(moved or objective.decrement(best.x) >= fit_cfg.tol
                     or _noise_share(best.x, model, power).max() > cfg.max_noise_share)
 
     first_iter = min(_FIRST_ITERATIONS, cfg.max_iter) if cfg.second_start else cfg.max_iter
-    first_params = np.full(5, np.nan)
+    first_params = np.full(model.n_body, np.nan)
     if warm is not None and warm.theta is not None and warm.theta.size == model.n_params:
         first_params = model.physical(warm.theta)
         run(warm.theta, first_iter)
-    elif start is not None and _physical(start, vehicle.wheelbase_m):
+    elif start is not None and _physical(start, model):
         first_params = np.asarray(start, dtype=float)
         run(_start_theta(model, objective, power, first_params, cfg.noise_start), first_iter, cold=True)
     if cfg.second_start and doubtful():
@@ -227,8 +232,9 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         raise _FitError(f"likelihood fit explains the {vehicle.channel_names[sensors[worst]]} channel as "
                         f"mostly noise ({share[worst]:.0%} of its band power): a wrong basin or a bad sensor")
     params = model.physical(theta)
-    if not 1e-3 * vehicle.wheelbase_m < params[3] < (1 - 1e-3) * vehicle.wheelbase_m:
-        raise _FitError(f"likelihood fit: CoG at the wheelbase's end (lf = {params[3]:.4g} m)")
+    lf = params[model.body.lf_index]
+    if not 1e-3 * vehicle.wheelbase_m < lf < (1 - 1e-3) * vehicle.wheelbase_m:
+        raise _FitError(f"likelihood fit: CoG at the wheelbase's end (lf = {lf:.4g} m)")
     info = objective.information(theta)  # as the optimiser's Hessian sums it (variances within 1 %)
     try:
         theta_cov = np.linalg.inv(info)
@@ -258,9 +264,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         notes += [f"speed check: {told.text()}"] if told.doubtful else []
     # uncalibrated values move from the model's vehicle; a misfit's corner calibration absorbed
     # structure (dampers stiffer in rebound moved l_f by 2 std): their first-order budget stands
-    assumed_now = model.vehicle
-    assert isinstance(assumed_now, FullVehicle)  # the half car's budget: its own refinement's
-    contributions, budget_theta = _contributions(objective, theta, theta_cov, assumed_now, warm,
+    contributions, budget_theta = _contributions(objective, theta, theta_cov, model.vehicle, warm,
                                                  calibration, fit is not None and not fit.ok)
     # the calibration's step completes the fit's convergence (the half car's tol_calibrated)
     if objective.decrement(theta) >= (cfg.tol if calibration is None else cfg.tol_calibrated) or \
@@ -271,13 +275,14 @@ def _refine(y: np.ndarray, fs: float, vehicle: FullVehicle, sensors: tuple[int, 
         status="ok", params=params, covariance=0.5 * (cov + cov.T), theta=theta, names=tuple(model.names),
         neg_log_likelihood=float(best.fun), iterations=iterations, starts=starts, band_hz=band,
         noise_std_mps2=tuple(np.sqrt(np.exp(theta[model.noise_slice]) * fs).tolist()),
-        waviness=float(theta[k["waviness"]]), coherence_scale=float(np.exp(theta[k["ln_coherence_scale"]])),
+        waviness=float(theta[k["waviness"]]),
+        coherence_scale=float(np.exp(theta[k["ln_coherence_scale"]])) if model.rolls else math.nan,
         contributions=contributions, budget_theta=budget_theta, variance_factors=tuple(factors.tolist()),
         sandwich=sandwich, calibration=calibration, notes=tuple(notes), model_fit=fit,
         information_lost=tuple(tuple(float(x) for x in row) for row in lost))
 
 
-def _contributions(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndarray, vehicle: FullVehicle,
+def _contributions(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndarray, vehicle: AnyVehicle,
                    warm: FullRefinement | None,
                    calibration: VehicleCalibration | None,
                    misfit: bool = False) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
@@ -293,10 +298,11 @@ def _contributions(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndar
         skip -= set(calibration.corner_keys)
         fresh = {name: c for name, c in fresh.items() if name not in calibration.corner_keys}
     if not misfit and warm is not None and warm.budget_theta is not None and warm.contributions and \
-            np.max(np.abs(theta[:5] - warm.budget_theta)) < _BUDGET_MOVE:
+            np.max(np.abs(theta[: warm.budget_theta.size] - warm.budget_theta)) < _BUDGET_MOVE:
         kept = {name: c for name, c in warm.contributions.items() if name.split("[")[0] not in skip}
         return kept | fresh, warm.budget_theta
-    return refinement_contributions(objective, theta, theta_cov, vehicle, skip) | fresh, theta[:5].copy()
+    body = theta[: objective.model.n_body].copy()
+    return refinement_contributions(objective, theta, theta_cov, vehicle, skip) | fresh, body
 
 
 def _spectra(y: np.ndarray, fs: float, band: tuple[float, float], taper: float,
@@ -325,9 +331,11 @@ def _noise_share(theta: np.ndarray, model: FullCarSpectrum, power: np.ndarray) -
     return np.exp(theta[model.noise_slice]) / power
 
 
-def _physical(params: np.ndarray, wheelbase_m: float) -> bool:
-    p = np.asarray(params, dtype=float)
-    return bool(p.shape == (5,) and np.all(np.isfinite(p)) and np.all(p[:3] > 0) and 0 < p[3] < wheelbase_m)
+def _physical(params: np.ndarray, model: FullCarSpectrum) -> bool:
+    """The body's parameters, finite, the mass and inertias positive, the CoG between the axles."""
+    p, lf = np.asarray(params, dtype=float), model.body.lf_index
+    return bool(p.shape == (model.n_body,) and np.all(np.isfinite(p)) and np.all(p[:lf] > 0)
+                and 0 < p[lf] < model.wheelbase_m)
 
 
 def _start_theta(model: FullCarSpectrum, objective: FullWhittle, power: np.ndarray, params: np.ndarray,
@@ -341,21 +349,25 @@ def _start_theta(model: FullCarSpectrum, objective: FullWhittle, power: np.ndarr
     return theta
 
 
-def _grid_start(model: FullCarSpectrum, objective: FullWhittle, power: np.ndarray, v: FullVehicle,
+def _grid_start(model: FullCarSpectrum, objective: FullWhittle, power: np.ndarray, v: AnyVehicle,
                 noise_share: float) -> np.ndarray:
-    """θ at the best point of a coarse grid: heave, pitch and roll frequencies on the corners'
-    static stiffness (suspension in series with tyre, the bars in roll), CoG at mid-wheelbase."""
-    k = np.array([ks * kt / (ks + kt) for ks, kt in zip(v.suspension_stiffness_npm, v.tyre_stiffness_npm,
-                                                        strict=True)])
-    x, yw = np.asarray(v.corner_x_m), np.asarray(v.corner_y_m)
-    lf = 0.45 * v.wheelbase_m
-    roll = float(k @ yw**2) + v.anti_roll_stiffness_front_nmprad + v.anti_roll_stiffness_rear_nmprad
+    """θ at the best point of a coarse grid: heave, pitch and (the full car) roll frequencies on
+    the corners' static stiffness (suspension in series with tyre, the bars in roll), the CoG at
+    mid-wheelbase; the half car's CoG at 30, 45 and 60 % of it instead of the roll."""
+    c = corners_of(v)
+    ks, kt = c.suspension_stiffness_npm, c.tyre_stiffness_npm
+    k = ks * kt / (ks + kt)
+    roll = float(k @ c.y_m**2) + float(c.bars_npm.diagonal() @ (2 * c.y_m) ** 2) / 2  # the bars' K = k t²
+    third = _GRID_HZ["roll"] if model.rolls else (0.3, 0.45, 0.6)
     scored: list[tuple[float, int, np.ndarray]] = []
     for fh in _GRID_HZ["heave"]:
         for fp in _GRID_HZ["pitch"]:
-            for fr in _GRID_HZ["roll"]:
-                params = np.array([k.sum() / (2 * math.pi * fh) ** 2, roll / (2 * math.pi * fr) ** 2,
-                                   float(k @ (x - lf) ** 2) / (2 * math.pi * fp) ** 2, lf, 0.0])
+            for z in third:
+                lf = (0.45 if model.rolls else z) * v.wheelbase_m
+                m = k.sum() / (2 * math.pi * fh) ** 2
+                iyy = float(k @ (c.x_m - lf) ** 2) / (2 * math.pi * fp) ** 2
+                params = np.array([m, roll / (2 * math.pi * z) ** 2, iyy, lf, 0.0]) if model.rolls else \
+                    np.array([m, iyy, lf])
                 theta = _start_theta(model, objective, power, params, noise_share)
                 nll = objective.nll(model.spectrum(theta, derivatives=False)[0])
                 scored.append((nll, len(scored), theta))

@@ -85,12 +85,12 @@ def road_parts(objective: FullWhittle, theta: np.ndarray, parts: np.ndarray) -> 
     _, H, _, _, _ = model.body_motion(theta)
     reads = model.sensing_at(theta) @ H
     weight = model.road_weight(theta)[:, None, None]
-    scale = float(np.exp(theta[model.index["ln_coherence_scale"]]))
+    scale = float(np.exp(theta[model.index["ln_coherence_scale"]])) if model.rolls else 0.0
     nodes = []
     for keep in parts:
         mix = model.mixture.part(keep)
         delay = np.stack([mix.share, mix.phi.conj(), mix.phi, mix.share], axis=-1).reshape(-1, 2, 2)
-        inputs = weight * model.road_inputs(mix.coherence(scale)[0], delay=delay)
+        inputs = weight * (model.road_inputs(mix.coherence(scale)[0], delay=delay) if model.rolls else delay)
         nodes.append(model.fold(reads @ inputs @ herm(reads)))
     at_nodes = np.stack(nodes)
     if model.grid_hz <= 0:  # S at each frequency: the nodes are the targets, with one beyond each

@@ -11,26 +11,23 @@ positions (each sensor's on its own: independent errors, one contribution each).
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Callable, Sequence
-from typing import Any
 
 import numpy as np
 
 from rozyn_estimator.method.budget import GROUPS, Budget
 from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES, fit_full_inertia
+from rozyn_estimator.method.full.uncertainty.moves import (
+    ABS_STEP,
+    AXLE,
+    moved_copy,
+    vehicle_moves,
+)
 from rozyn_estimator.method.identification import IdentificationError, Mode
-from rozyn_estimator.tolerances import HEIGHT_KEYS
 from rozyn_estimator.vehicle_full import FullVehicle
 
-_REL_STEP = 1e-5  # share of a value
-ABS_STEP = 1e-6  # m, s or share of a gain
 _GROUPS = {**GROUPS, "track": "tracks", "anti_roll": "anti-roll bars", "sensor_lateral": "sensor positions",
            "gyro_misalignment": "gyro turns"}
-_QUADS = {"suspension_stiffness": "suspension_stiffness_npm", "suspension_damping": "suspension_damping_nspm",
-          "tyre_stiffness": "tyre_stiffness_npm", "tyre_damping": "tyre_damping_nspm",
-          "unsprung_mass": "unsprung_mass_kg"}
-AXLE = {"front": (0, 1), "rear": (2, 3)}
 
 
 class FullBudget(Budget):
@@ -59,51 +56,7 @@ def full_contributions(v: FullVehicle, modes: Sequence[Mode], sensors: Sequence[
     return out
 
 
-VehicleMove = Callable[[float], FullVehicle]
 Move = Callable[[float], tuple[FullVehicle, Callable[[Mode], Mode]]]
-
-
-def moved_copy(v: FullVehicle, **changes: Any) -> FullVehicle:
-    """``v`` with values moved a tiny step, without FullVehicle's validation (a few ms a time,
-    the budgets' largest cost otherwise): the step cannot leave the valid range."""
-    out = copy.copy(v)
-    for name, value in changes.items():
-        object.__setattr__(out, name, value)
-    return out
-
-
-def vehicle_moves(v: FullVehicle, key: str,
-                  sensors: Sequence[int]) -> list[tuple[str, float, VehicleMove]] | None:
-    """(contribution name, step, the vehicle with the value moved by the step) of a tolerance
-    key that moves the vehicle alike for both budgets: an axle's corner values, an anti-roll
-    bar, the wheelbase and tracks, each sensor's lateral position; None for the other keys
-    (the sensors' offsets, gains and timing: each budget moves those its own way)."""
-    def scaled(quad: str, corners: tuple[int, ...], h: float) -> FullVehicle:
-        values = list(getattr(v, quad))
-        for c in corners:
-            values[c] *= 1.0 + h
-        return moved_copy(v, **{quad: tuple(values)})
-
-    def lateral(c: int) -> VehicleMove:
-        def move(h: float) -> FullVehicle:
-            ys = list(v.sensor_y_m)
-            ys[c] += h
-            return moved_copy(v, sensor_y_m=tuple(ys))
-        return move
-
-    axle = "front" if "_front" in key else "rear"
-    quad = next((q for k, q in _QUADS.items() if key.startswith(k)), None)
-    if quad is not None:
-        return [(key, _REL_STEP, lambda h: scaled(quad, AXLE[axle], h))]
-    if key.startswith("anti_roll"):
-        bar = getattr(v, key)
-        return [] if bar == 0 else [(key, _REL_STEP, lambda h: moved_copy(v, **{key: bar * (1 + h)}))]
-    if key in ("wheelbase_m", "track_front_m", "track_rear_m", *HEIGHT_KEYS):
-        return [(key, ABS_STEP, lambda h: moved_copy(v, **{key: getattr(v, key) + h}))]
-    if key == "sensor_lateral_m":
-        return [(f"{key}[{v.channel_names[c]}]", ABS_STEP, lateral(c)) for c in sensors
-                if v.channel_kinds[c] == "accel_z"]  # a gyro reads the same rotation anywhere
-    return None
 
 
 def _moves(v: FullVehicle, key: str, sensors: Sequence[int]) -> list[tuple[str, float, Move]]:
@@ -111,7 +64,7 @@ def _moves(v: FullVehicle, key: str, sensors: Sequence[int]) -> list[tuple[str, 
     def same(md: Mode) -> Mode:
         return md
 
-    def unsensed(move: VehicleMove) -> Move:
+    def unsensed(move: Callable[[float], FullVehicle]) -> Move:
         return lambda h: (move(h), same)
 
     def sensed(corners: tuple[int, ...], factor: Callable[[Mode], complex]) -> Callable[[Mode], Mode]:

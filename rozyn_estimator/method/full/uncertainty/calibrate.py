@@ -34,13 +34,14 @@ from typing import cast
 
 import numpy as np
 
+from rozyn_estimator.body_model import AnyVehicle
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.full.uncertainty import corners, sensing
 from rozyn_estimator.method.full.uncertainty.corners import CornerCalibrating
+from rozyn_estimator.method.full.uncertainty.moves import axle_of
 from rozyn_estimator.method.full.whittle import FullWhittle, ridged, scoring
 from rozyn_estimator.method.likelihood.uncertainty.augment import backtracked
 from rozyn_estimator.method.likelihood.uncertainty.calibration import Calibration
-from rozyn_estimator.vehicle_full import FullVehicle
 
 _FAR = 3.0  # a step longer than this many posterior std: beyond the linear range
 # a cold fit's Newton decrement at which it may hand over to the calibration: every combination
@@ -68,7 +69,7 @@ class VehicleCalibration:
     groups: tuple[str, ...]  # the calibrated sensor groups (:data:`.sensing.GROUPS`)
     values: np.ndarray  # the sensors' departures, all groups' (:func:`.sensing.parameter_names`; 0: not fit)
     calibrations: tuple[Calibration, ...]  # each calibrated value: estimate, posterior std, tolerance
-    contributions: dict[str, np.ndarray]  # what each value's remaining uncertainty adds to (5,)
+    contributions: dict[str, np.ndarray]  # what each value's remaining uncertainty adds to (n_body,)
     body: np.ndarray  # θ's body parameters (ln m, ln I_xx, ln I_yy, logit l_f, y_c [m]) it was taken at
     converged: bool = True  # False: the optimiser stopped at its iteration limit
     age: int = 0  # the later windows that took it over
@@ -83,7 +84,7 @@ class VehicleCalibration:
         moved by less than ``_KEEP_MOVE`` since, and it is younger than ``_KEEP_UPDATES``
         windows (the vehicle does not change; the later windows' data refresh it)."""
         return self.converged and self.age < _KEEP_UPDATES and \
-            float(np.max(np.abs(theta[:5] - self.body))) < _KEEP_MOVE
+            float(np.max(np.abs(theta[: self.body.size] - self.body))) < _KEEP_MOVE
 
     def departures(self) -> list[str]:
         """Notes on the values the data put further from the vehicle file's than ``_DEPARTED``
@@ -101,7 +102,7 @@ class VehicleCalibration:
         """It calibrated these sensor groups and corner values (a window may start from it)."""
         return self.groups == groups and self.corner_keys == corner_keys
 
-    def vehicle(self, file_vehicle: FullVehicle) -> FullVehicle:
+    def vehicle(self, file_vehicle: AnyVehicle) -> AnyVehicle:
         """The vehicle file's with the calibrated corner values."""
         return corners.moved(file_vehicle, self.corner_keys, self.corner_shares)
 
@@ -111,14 +112,14 @@ class VehicleCalibration:
         return {key for g in self.groups for key in TOLERANCE_KEYS[g]} | set(self.corner_keys)
 
 
-def sensor_groups(vehicle: FullVehicle, sensors: tuple[int, ...]) -> tuple[str, ...]:
+def sensor_groups(vehicle: AnyVehicle, sensors: tuple[int, ...]) -> tuple[str, ...]:
     """The groups the vehicle's tolerances call for (the delay with channels on both clocks only:
-    :attr:`~rozyn_estimator.vehicle_full.FullVehicle.channel_late`)."""
+    :attr:`~rozyn_estimator.vehicle_full.AnyVehicle.channel_late`)."""
     tol = vehicle.tolerances.to_dict()
     late = [vehicle.channel_late[c] for c in sensors]
     both_axles = any(late) and not all(late)
     gyros = any(vehicle.channel_kinds[c] != "accel_z" for c in sensors)
-    return tuple(g for g in sensing.GROUPS if any(tol[key] > 0 for key in TOLERANCE_KEYS[g])
+    return tuple(g for g in sensing.GROUPS if any(tol.get(key, 0.0) > 0 for key in TOLERANCE_KEYS[g])
                  and (g != "delay" or both_axles) and (g != "turn" or gyros))
 
 
@@ -132,7 +133,7 @@ class Posterior:
 
 
 def calibrate_vehicle(
-    objective: FullWhittle, theta: np.ndarray, vehicle: FullVehicle, groups: tuple[str, ...],
+    objective: FullWhittle, theta: np.ndarray, vehicle: AnyVehicle, groups: tuple[str, ...],
     start: VehicleCalibration | None = None, max_iter: int = 100, corner_keys: tuple[str, ...] = (),
 ) -> tuple[np.ndarray, VehicleCalibration, Posterior]:
     """(the fit's θ at the posterior's mode, the calibration, the posterior) from the fit's
@@ -179,15 +180,16 @@ def calibrate_vehicle(
                         _CONVERGED, max_iter)
         point, converged = found.x, bool(found.get("success")) or posterior.decrement(found.x) < _CONVERGED
         info = posterior.information(point)
-    contributions, posterior_std, varying = _contributions(info, model, point, precision[n:], base.sensors,
-                                                           labels)
+    contributions, posterior_std, varying = _contributions(info, model, point, precision[n:], vehicle,
+                                                           base.sensors, labels)
     fitted = point[n:]
     calibrations = tuple(Calibration(*_reported(name, labels, float(x), float(sd), float(tol)))
                          for name, x, sd, tol in zip(names, fitted, posterior_std, stds, strict=True)
                          if not _held(name, gyros))
     n_sensor = fitted.size - len(corner_keys)
     calibration = VehicleCalibration(groups, _every(fitted[:n_sensor], groups, k), calibrations,
-                                     contributions, point[:5].copy(), converged, corner_keys=corner_keys,
+                                     contributions, point[: base.n_body].copy(), converged,
+                                     corner_keys=corner_keys,
                                      corner_shares=fitted[n_sensor:].copy(), varying=varying)
     return point[:n], calibration, Posterior(posterior, point)
 
@@ -203,9 +205,9 @@ def _shares_valid(model: FullCarSpectrum | CornerCalibrating, point: np.ndarray)
 
 def _contributions(
     info: np.ndarray, model: FullCarSpectrum | CornerCalibrating, point: np.ndarray, precision: np.ndarray,
-    sensors: tuple[int, ...], labels: tuple[str, ...],
+    vehicle: AnyVehicle, sensors: tuple[int, ...], labels: tuple[str, ...],
 ) -> tuple[dict[str, np.ndarray], np.ndarray, dict[str, np.ndarray]]:
-    """(each calibrated value's contribution (5,) to the estimate, the values' posterior std, the
+    """(each calibrated value's contribution (n_body,) to the estimate, the values' posterior std, the
     contributions' part that varies between windows) from the data's information ``info`` of the
     augmented ``model``: the module docstring's split of ``A M Aᵀ``, ``M`` the values' posterior
     covariance; the varying part ``A (M - M P⁻¹ M) Aᵀ``, the spread of a window's posterior mean
@@ -216,7 +218,7 @@ def _contributions(
     A = np.linalg.solve(F, shared)
     M = np.linalg.inv(info[n:, n:] + np.diag(precision) - shared.T @ A)
     to_params = model.physical_jacobian(point)[:, :n] @ A
-    names = [_budget_name(name, sensors, labels) for name in model.names[model.calibration_slice]]
+    names = [_budget_name(vehicle, name, sensors, labels) for name in model.names[model.calibration_slice]]
     per_value, varying = (to_params @ _root(C) for C in (M, M - M @ np.diag(precision) @ M))
     return ({name: per_value[:, j] for j, name in enumerate(names)}, np.sqrt(np.clip(np.diag(M), 0.0, None)),
             {name: varying[:, j] for j, name in enumerate(names)})
@@ -228,27 +230,27 @@ def _root(C: np.ndarray) -> np.ndarray:
     return (vec * np.sqrt(np.clip(lam, 0.0, None))) @ vec.T
 
 
-def _tolerance_key(name: str, sensors: tuple[int, ...]) -> tuple[str, int | None]:
-    """(the tolerance key, the sensor's corner; None for the delay and a corner value) of a
-    calibrated value."""
+def _tolerance_key(vehicle: AnyVehicle, name: str, sensors: tuple[int, ...]) -> tuple[str, int | None]:
+    """(the tolerance key, the sensor's channel slot; None for the delay and a corner value) of
+    a calibrated value."""
     if name.startswith(corners.NAME_PREFIX):
         return name.removeprefix(corners.NAME_PREFIX), None
     if name == "delay_ms":
         return "sensor_time_offset_s", None
     kind, index = name.rsplit("_", 1)
     corner = sensors[int(index)]
-    axle = "front" if corner < 2 else "rear"
+    axle = axle_of(vehicle, corner)
     return {"ln_gain": f"sensor_gain_{axle}", "sensor_dx": f"sensor_{axle}_offset_m",
             "sensor_dy": "sensor_lateral_m", "gyro_turn": "gyro_misalignment_rad"}[kind], corner
 
 
-def _prior_stds(vehicle: FullVehicle, sensors: tuple[int, ...], names: list[str]) -> np.ndarray:
+def _prior_stds(vehicle: AnyVehicle, sensors: tuple[int, ...], names: list[str]) -> np.ndarray:
     """Each calibrated value's tolerance in θ's units (a log gain: the share; m; ms)."""
     tol = vehicle.tolerances.to_dict()
     gyros = [vehicle.channel_kinds[c] != "accel_z" for c in sensors]
     out = [0.0 if _held(name, gyros) else
-           tol[key] / (sensing.DELAY_SCALE_S if name == "delay_ms" else 1.0)
-           for name, (key, _) in ((name, _tolerance_key(name, sensors)) for name in names)]
+           tol.get(key, 0.0) / (sensing.DELAY_SCALE_S if name == "delay_ms" else 1.0)
+           for name, (key, _) in ((name, _tolerance_key(vehicle, name, sensors)) for name in names)]
     return np.maximum(np.array(out), _FIXED)
 
 
@@ -260,9 +262,9 @@ def _held(name: str, gyros: list[bool]) -> bool:
                                                                           not gyros[int(index)])
 
 
-def _budget_name(name: str, sensors: tuple[int, ...], labels: tuple[str, ...]) -> str:
+def _budget_name(vehicle: AnyVehicle, name: str, sensors: tuple[int, ...], labels: tuple[str, ...]) -> str:
     """The budget's name of a calibrated value (as :mod:`.refine_budget` names its moves)."""
-    key, corner = _tolerance_key(name, sensors)
+    key, corner = _tolerance_key(vehicle, name, sensors)
     return key if corner is None else f"{key}[{labels[int(name.rsplit('_', 1)[1])]}]"
 
 

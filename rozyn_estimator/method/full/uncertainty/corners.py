@@ -17,10 +17,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from rozyn_estimator.method.full.fit import CORNER_VALUES
+from rozyn_estimator.body_model import AnyVehicle
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
-from rozyn_estimator.method.full.uncertainty.budget import vehicle_moves
-from rozyn_estimator.vehicle_full import FullVehicle
+from rozyn_estimator.method.full.uncertainty.moves import values_of, vehicle_moves
 
 PREFIXES = ("suspension_stiffness", "suspension_damping", "tyre_stiffness", "tyre_damping", "unsprung_mass",
             "anti_roll_stiffness")
@@ -28,18 +27,13 @@ _LOWEST = -0.9  # a share below this would leave a value at a tenth of the file'
 NAME_PREFIX = "corner:"  # θ's name of a share: the prefix and its tolerance key
 
 
-def corner_keys(vehicle: FullVehicle) -> tuple[str, ...]:
+def corner_keys(vehicle: AnyVehicle) -> tuple[str, ...]:
     """The tolerance keys of the corner values that have a tolerance (a bar only if fitted)."""
     return tuple(key for key, tol in vehicle.tolerances.to_dict().items()
                  if tol > 0 and key.startswith(PREFIXES) and vehicle_moves(vehicle, key, ()))
 
 
-def values_of(vehicle: FullVehicle) -> np.ndarray:
-    """(22,) the vehicle's :data:`~.fit.CORNER_VALUES`, flat."""
-    return np.concatenate([np.ravel(getattr(vehicle, name)) for name in CORNER_VALUES]).astype(float)
-
-
-def _scaled(vehicle: FullVehicle, key: str, share: float) -> FullVehicle:
+def _scaled(vehicle: AnyVehicle, key: str, share: float) -> AnyVehicle:
     """``vehicle`` with one key's values times ``1 + share`` (as the budgets move them)."""
     moves = vehicle_moves(vehicle, key, ())
     if not moves:
@@ -47,13 +41,14 @@ def _scaled(vehicle: FullVehicle, key: str, share: float) -> FullVehicle:
     return moves[0][2](share)
 
 
-def directions(vehicle: FullVehicle, keys: Sequence[str]) -> np.ndarray:
-    """(len(keys), 22) the change of the corner values per unit share of each key."""
+def directions(vehicle: AnyVehicle, keys: Sequence[str]) -> np.ndarray:
+    """(len(keys), values) the change of the corner values (:func:`.moves.values_of`) per unit
+    share of each key."""
     base = values_of(vehicle)
     return np.array([values_of(_scaled(vehicle, key, 1.0)) - base for key in keys])
 
 
-def moved(vehicle: FullVehicle, keys: Sequence[str], shares: np.ndarray) -> FullVehicle:
+def moved(vehicle: AnyVehicle, keys: Sequence[str], shares: np.ndarray) -> AnyVehicle:
     """``vehicle`` with each key's values times ``1 + share``.
 
     Raises:
@@ -79,7 +74,7 @@ class CornerCalibrating:
         keys: the calibrated corner values' tolerance keys (:func:`corner_keys`).
     """
 
-    def __init__(self, model: FullCarSpectrum, vehicle: FullVehicle, keys: Sequence[str]) -> None:
+    def __init__(self, model: FullCarSpectrum, vehicle: AnyVehicle, keys: Sequence[str]) -> None:
         self.model, self.file_vehicle, self.keys = model, vehicle, tuple(keys)
         self.directions = directions(vehicle, self.keys)
         self.n_model = model.n_params
@@ -93,7 +88,7 @@ class CornerCalibrating:
         """(the model's θ, the shares)."""
         return theta[: self.n_model], theta[self.n_model:]
 
-    def vehicle_at(self, theta: np.ndarray) -> FullVehicle:
+    def vehicle_at(self, theta: np.ndarray) -> AnyVehicle:
         """The vehicle θ's shares make of the file's."""
         return moved(self.file_vehicle, self.keys, self.split(theta)[1])
 
@@ -122,8 +117,8 @@ class CornerCalibrating:
                                    self.model.corner_derivatives(own, self.directions)])
 
     def physical_jacobian(self, theta: np.ndarray) -> np.ndarray:
-        """(5, n_params): the shares do not enter the body's parameters."""
-        jac = np.zeros((5, self.n_params))
+        """(n_body, n_params): the shares do not enter the body's parameters."""
+        jac = np.zeros((self.model.n_body, self.n_params))
         jac[:, : self.n_model] = self.model.physical_jacobian(self.split(theta)[0])
         return jac
 

@@ -31,27 +31,28 @@ from collections.abc import Callable
 
 import numpy as np
 
-from rozyn_estimator.method.full.fit import CORNER_VALUES
+from rozyn_estimator.body_model import AnyVehicle
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
-from rozyn_estimator.method.full.uncertainty.budget import (
+from rozyn_estimator.method.full.uncertainty.geometry import GEOMETRY, geometry_derivatives
+from rozyn_estimator.method.full.uncertainty.moves import (
     ABS_STEP,
-    AXLE,
     VehicleMove,
-    moved_copy,
+    axle_channels,
+    corner_fields,
+    sensor_fields,
+    shifted_sensor,
+    values_of,
     vehicle_moves,
 )
-from rozyn_estimator.method.full.uncertainty.corners import values_of
-from rozyn_estimator.method.full.uncertainty.geometry import GEOMETRY, geometry_derivatives
 from rozyn_estimator.method.full.whittle import FullWhittle
 from rozyn_estimator.vehicle_full import FullVehicle
 
-_SENSOR_FIELDS = ("sensor_x_m", "sensor_y_m")
 # a move: the step -> (the vehicle moved, a factor per channel (F, k) or None)
-Move = Callable[[float], tuple[FullVehicle, np.ndarray | None]]
+Move = Callable[[float], tuple[AnyVehicle, np.ndarray | None]]
 
 
 def refinement_contributions(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndarray,
-                             vehicle: FullVehicle, skip: set[str] | None = None) -> dict[str, np.ndarray]:
+                             vehicle: AnyVehicle, skip: set[str] | None = None) -> dict[str, np.ndarray]:
     """Contributions ``c_j`` (5,) of each toleranced value of ``vehicle`` to the refined estimate
     (but those of the tolerance keys in ``skip``: the calibrated sensors')."""
     model = objective.model
@@ -71,7 +72,8 @@ def refinement_contributions(objective: FullWhittle, theta: np.ndarray, theta_co
     if sensor_moves:
         derivatives = model.sensing_derivatives(theta, np.array([d for _, d in sensor_moves]))
         changes.update(zip([name for name, _ in sensor_moves], derivatives, strict=True))
-    geometry = [name for name in order if name in GEOMETRY and name not in changes]
+    geometry = [name for name in order if name in GEOMETRY and name not in changes] \
+        if isinstance(vehicle, FullVehicle) else []  # the half car's: stepped
     if geometry:
         changes.update(zip(geometry, geometry_derivatives(model, theta, geometry), strict=True))
     for name, step, (moved, factor), _ in moves:
@@ -87,47 +89,42 @@ def refinement_contributions(objective: FullWhittle, theta: np.ndarray, theta_co
     return {name: per_unit[:, j] * tols[name] for j, name in enumerate(order)}
 
 
-def _corner_direction(base: FullVehicle, moved: FullVehicle, factor: np.ndarray | None,
+def _corner_direction(base: AnyVehicle, moved: AnyVehicle, factor: np.ndarray | None,
                       step: float) -> np.ndarray | None:
-    """(22,) the move's change of the corners' values per unit step
-    (:data:`~rozyn_estimator.method.full.fit.CORNER_VALUES`), or None when it moves anything
-    else."""
-    if factor is not None or not _moves_only(base, moved, CORNER_VALUES):
+    """The move's change of the corners' values per unit step (:func:`.moves.values_of`), or
+    None when it moves anything else."""
+    if factor is not None or not _moves_only(base, moved, corner_fields(base)):
         return None
     return (values_of(moved) - values_of(base)) / step
 
 
-def _sensor_change(model: FullCarSpectrum, base: FullVehicle, moved: FullVehicle, factor: np.ndarray | None,
+def _sensor_change(model: FullCarSpectrum, base: AnyVehicle, moved: AnyVehicle, factor: np.ndarray | None,
                    step: float) -> np.ndarray | None:
-    """(F, k, 3) the move's change of the sensing per unit step, or None when it moves
+    """(F, k, b) the move's change of the sensing per unit step, or None when it moves
     anything but the sensors' positions (and their channels' factors)."""
-    if not _moves_only(base, moved, _SENSOR_FIELDS):
+    if not _moves_only(base, moved, sensor_fields(base)):
         return None
     return (model.sensing_of(moved, factor) - model.sensing) / step
 
 
-def _moves_only(base: FullVehicle, moved: FullVehicle, names: tuple[str, ...]) -> bool:
+def _moves_only(base: AnyVehicle, moved: AnyVehicle, names: tuple[str, ...]) -> bool:
     """``moved`` (a :func:`moved_copy` of ``base``) holds ``base``'s own values but ``names``."""
     return all(getattr(moved, f.name) is getattr(base, f.name) for f in dataclasses.fields(base)
                if f.name not in names)
 
 
-def _moves(v: FullVehicle, model: FullCarSpectrum, key: str) -> list[tuple[str, float, Move]]:
+def _moves(v: AnyVehicle, model: FullCarSpectrum, key: str) -> list[tuple[str, float, Move]]:
     """(contribution name, step, the move) of one tolerance key: the vehicle's values as in
     Rozyn's stage's budget; each sensor's offset and gain on its own, the rear sensors' timing
     as a factor on their channels."""
     def unsensed(move: VehicleMove) -> Move:
         return lambda h: (move(h), None)
 
-    def shifted(corner: int) -> Move:
-        def move(h: float) -> tuple[FullVehicle, np.ndarray | None]:
-            xs = list(v.sensor_x_m)
-            xs[corner] += h
-            return moved_copy(v, sensor_x_m=tuple(xs)), None
-        return move
+    def shifted(channel: int) -> Move:
+        return lambda h: (shifted_sensor(v, channel, h), None)
 
     def channel(columns: list[int], factor: Callable[[float], np.ndarray]) -> Move:
-        def move(h: float) -> tuple[FullVehicle, np.ndarray | None]:
+        def move(h: float) -> tuple[AnyVehicle, np.ndarray | None]:
             out = np.ones((model.omega.size, model.k), dtype=complex)
             out[:, columns] = factor(h)[:, None]
             return v, out
@@ -137,7 +134,7 @@ def _moves(v: FullVehicle, model: FullCarSpectrum, key: str) -> list[tuple[str, 
     alike = vehicle_moves(v, key, sensors)
     if alike is not None:
         return [(name, step, unsensed(move)) for name, step, move in alike]
-    axle = AXLE["front" if "_front" in key else "rear"]
+    axle = axle_channels(v, "front" if "_front" in key else "rear")
     if key in ("sensor_front_offset_m", "sensor_rear_offset_m"):
         return [(f"{key}[{v.channel_names[c]}]", ABS_STEP, shifted(c)) for c in sensors
                 if c in axle and v.channel_kinds[c] == "accel_z"]  # a gyro reads the same anywhere
