@@ -13,7 +13,8 @@ import pytest
 
 from rozyn_estimator.method import METHODS, PipelineConfig, estimate
 from rozyn_estimator.method.budget import Budget, rozyn_contributions
-from rozyn_estimator.method.likelihood import LikelihoodConfig, refine
+from rozyn_estimator.method.full.refine import refine_full
+from rozyn_estimator.method.likelihood import LikelihoodConfig
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.departures import Departures
@@ -23,6 +24,12 @@ from sim_node.simulation import SimConfig, Simulation
 SPEED = 100 / 3.6
 START = np.array([1000.0, 2000.0, 1.2])
 EXACT = Vehicle(tolerances=Tolerances.none())
+
+
+def refine(y: np.ndarray, fs_hz: float, vehicle: Vehicle, start: np.ndarray, speed: float,
+           config: LikelihoodConfig | None = None):
+    """The refinement of the half car's front and rear channels."""
+    return refine_full(y, fs_hz, vehicle, (0, 1), start, speed, config)
 
 
 def window(seed: int = 5, departures: Departures | None = None) -> np.ndarray:
@@ -41,7 +48,7 @@ def test_no_tolerances_is_the_estimator_as_before(clean):
     """tolerances {}: no budget, no calibration, the published covariance is the fit's."""
     est = estimate(clean, 100.0, EXACT, PipelineConfig(), SPEED)
     assert est.ok and est.budget is None and est.refinement.contributions == {}
-    assert est.refinement.calibration == () and np.array_equal(est.covariance, est.refinement.covariance)
+    assert est.refinement.calibration is None and np.array_equal(est.covariance, est.refinement.covariance)
     rozyn = estimate(clean, 100.0, EXACT, METHODS["rozyn"], SPEED)
     assert rozyn.budget is None
 
@@ -74,7 +81,7 @@ def test_default_tolerances_widen_the_covariance_honestly(clean):
     assert np.all(total > 3 * stat)  # the tolerances dominate the data's own spread
     assert np.all(np.abs(est.params / START - 1) < 2 * total / START)
     names = {c.name for c in b.calibration}
-    assert {"sensor_time_offset_s", "sensor_gain_ratio", "tyre_stiffness_front_npm"} <= names
+    assert {"sensor_time_offset_s", "sensor_gain_rear", "tyre_stiffness_front_npm"} <= names
     offset = next(c for c in b.calibration if c.name == "sensor_time_offset_s")
     assert offset.identified and abs(offset.estimate) < 4 * offset.std
     text = b.text(0)
@@ -104,10 +111,10 @@ def test_a_late_rear_sensor_is_calibrated_and_reported():
     y = window(departures=Departures(time_offset_s=0.005))
     vehicle = EXACT.replace(tolerances=Tolerances.from_mapping({"sensor_time_offset_s": 0.005}))
     ref = refine(y, 100.0, vehicle, START, SPEED)
-    (offset,) = ref.calibration
+    (offset,) = ref.calibration.calibrations
     assert offset.name == "sensor_time_offset_s" and abs(offset.estimate - 0.005) < 4 * offset.std
-    assert offset.identified
-    assert not ref.model_fit.ok and "sensor timing" in ref.model_fit.verdict
+    assert offset.identified and offset.text().startswith("+4.9")  # ms
+    assert ref.model_fit.ok  # calibrated, the model fits
     blind = refine(y, 100.0, EXACT, START, SPEED)  # not told it may be late: the spectra do not fit
     assert not blind.model_fit.ok and "does not fit" in blind.model_fit.verdict
 
@@ -120,7 +127,7 @@ def test_asymmetric_dampers_fail_the_model_fit_check(clean):
 
 
 def test_a_model_fit_check_on_a_singular_spectrum_is_not_computable_not_fits(clean, monkeypatch):
-    from rozyn_estimator.method.likelihood import fitcheck
+    from rozyn_estimator.method.full import fitcheck
 
     real = fitcheck.whiteness
 
@@ -140,9 +147,10 @@ def test_a_model_fit_check_on_a_singular_spectrum_is_not_computable_not_fits(cle
 def test_a_model_fit_check_whose_statistic_is_not_a_number_gives_no_verdict(clean, monkeypatch):
     """Whatever makes the statistic NaN or infinite, the check says it could not be computed:
     a NaN's p-value is never below the threshold, which would otherwise read as "fits"."""
+    from rozyn_estimator.method.full import refine as one
     from rozyn_estimator.method.likelihood import fitcheck
 
-    monkeypatch.setattr(fitcheck, "neighbour_correlation", lambda window_dft: math.nan)
+    monkeypatch.setattr(one, "neighbour_correlation", lambda window_dft: math.nan)
     fit = refine(clean, 100.0, EXACT, START, SPEED).model_fit
     assert fit is not None and not fit.ok and fit.verdict == fitcheck.NOT_COMPUTABLE
     assert fit.to_dict()["statistic"] is None

@@ -9,8 +9,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from rozyn_estimator.method.full import FullEstimate, estimate_full, refine
+from rozyn_estimator.method.full import refine
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.stage import FullEstimate, estimate_full
 from rozyn_estimator.method.full.uncertainty import calibrate
 from rozyn_estimator.method.full.uncertainty.calibrate import VehicleCalibration, sensor_groups
 from rozyn_estimator.method.full.uncertainty.corners import CornerCalibrating, corner_keys

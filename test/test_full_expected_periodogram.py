@@ -11,10 +11,10 @@ import pytest
 from scipy.signal import windows
 
 from rozyn_estimator.method import METHODS
-from rozyn_estimator.method.full import estimate_full
 from rozyn_estimator.method.full.grid import averaging_matrix, expected_periodogram_m2
 from rozyn_estimator.method.full.refine import refine_full
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec

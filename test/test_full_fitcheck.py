@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rozyn_estimator.method.full import FullEstimate
+from rozyn_estimator.method.full.stage import FullEstimate
 from rozyn_estimator.method.likelihood.fitcheck import ALPHA
 from rozyn_estimator.online.records import WARN, Update, layout_of, update_values
 from rozyn_estimator.tools.cars import FULL

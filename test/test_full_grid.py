@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.method import PipelineConfig
-from rozyn_estimator.method.full import estimate_full, whittle
+from rozyn_estimator.method.full import whittle
 from rozyn_estimator.method.full.fit import (
     CORNER_VALUES,
     corner_matrices,
@@ -22,6 +22,7 @@ from rozyn_estimator.method.full.fit import (
 )
 from rozyn_estimator.method.full.grid import ALIAS_SPACING_HZ, alias_map
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.full.uncertainty import refine_budget
 from rozyn_estimator.method.full.whittle import FullWhittle
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle

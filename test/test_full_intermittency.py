@@ -10,8 +10,9 @@ import pytest
 from scipy import signal
 
 from rozyn_estimator.method import METHODS
-from rozyn_estimator.method.full import estimate_full, intermittency, refine
+from rozyn_estimator.method.full import intermittency, refine
 from rozyn_estimator.method.full.intermittency import road_intermittency, road_itself
+from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation

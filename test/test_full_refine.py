@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.method import PipelineConfig
-from rozyn_estimator.method.full import estimate_full
 from rozyn_estimator.method.full.refine import refine_full
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation

@@ -14,8 +14,8 @@ import pytest
 import rozyn_estimator.method.full.refine as refine_module
 import rozyn_estimator.method.full.score as score_module
 from rozyn_estimator.method import PipelineConfig
-from rozyn_estimator.method.full import estimate_full
 from rozyn_estimator.method.full.score import score_covariance
+from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation

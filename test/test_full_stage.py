@@ -10,8 +10,8 @@ import pytest
 
 from rozyn_estimator.body_model import heave_index
 from rozyn_estimator.method import PipelineConfig
-from rozyn_estimator.method.full import FULL_PARAM_NAMES, estimate_full
-from rozyn_estimator.method.full.fit import corner_stiffness, fit_full_inertia, plane_map
+from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES, corner_stiffness, fit_full_inertia, plane_map
+from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.identification import (
     IdentificationError,
     select_body_modes,

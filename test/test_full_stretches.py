@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.method import METHODS
-from rozyn_estimator.method.full import estimate_full, intermittency, refine, stretches
+from rozyn_estimator.method.full import intermittency, refine, stretches
+from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.full.stretches import drive_stretches
 from rozyn_estimator.method.likelihood.road_input import DRIVING_MPS
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle

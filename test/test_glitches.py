@@ -90,7 +90,7 @@ def test_gating_leaves_the_input_untouched():
 
 def test_the_full_car_gates_and_reports_a_glitch_per_corner():
     """Its estimate counts what the window's check gated, per channel, and /diagnostics says it."""
-    from rozyn_estimator.method.full import estimate_full
+    from rozyn_estimator.method.full.stage import estimate_full
     from rozyn_estimator.online.records import layout_of
     from rozyn_estimator.vehicle_full import FullVehicle
 

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.method import METHODS
-from rozyn_estimator.method.full import estimate_full
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.likelihood import HalfCarSpectrum
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.road_input import driving_speed, spatial_band

@@ -56,7 +56,7 @@ def test_the_verdict_needs_evidence_and_a_factor(ratio, gain, wrong, doubtful):
 
 def test_the_full_car_names_km_per_hour_sent_as_m_per_s():
     """The full car's refinement runs the same check on its own likelihood."""
-    from rozyn_estimator.method.full import estimate_full
+    from rozyn_estimator.method.full.stage import estimate_full
     from rozyn_estimator.vehicle_full import FullVehicle
 
     sim = SimConfig(model="full", duration_s=120.0, seed=11, road=RoadSpec(amplitudes="gaussian"),

@@ -14,8 +14,14 @@ which is why this is not four ``ccovf`` calls (the tests check the two agree).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy import fft as sfft
+
+from rozyn_estimator.body_model import AnyVehicle
+from rozyn_estimator.method.config import PipelineConfig
+from rozyn_estimator.method.glitches import InputError
 
 
 def block_bounds(n_samples: int, n_blocks: int) -> np.ndarray:
@@ -51,3 +57,17 @@ def correlation_sums(y: np.ndarray, max_lag: int, n_blocks: int = 1) -> np.ndarr
     spec_base = sfft.rfft(base, axis=1)
     cross = spec_lead[:, :, :, None] * np.conj(spec_base[:, :, None, :])
     return sfft.irfft(cross, n=nfft, axis=1)[:, : max_lag + 1]
+
+
+def lag_range(cfg: PipelineConfig, fs_hz: float, v: AnyVehicle,
+              speed_mps: float | None) -> tuple[int, int]:
+    """(first, last) correlation lag in samples (the wheelbase delay skipped when asked)."""
+    first_s = cfg.min_lag_s
+    if cfg.skip_wheelbase_delay and speed_mps is not None and speed_mps > 0:
+        first_s = max(first_s, v.wheelbase_m / speed_mps)
+    if not first_s * fs_hz < 1e12:  # a speed so low that no window holds one wheelbase delay
+        raise InputError(f"speed {speed_mps:.3g} m/s: the wheelbase delay {first_s:.3g} s exceeds any window")
+    first = math.ceil(first_s * fs_hz - 1e-9)
+    if cfg.correlation == "multi-reference":
+        first = max(first, 1)  # lag 0 carries the sensor noise variance
+    return first, first + round(cfg.max_lag_s * fs_hz)

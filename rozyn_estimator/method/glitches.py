@@ -1,4 +1,5 @@
-"""Glitch gating: samples no vehicle produced, found per channel before either stage sees them.
+"""The window's checks (:func:`checked_window`) and glitch gating: samples no vehicle produced, found per
+channel before either stage sees them.
 
 A real accelerometer now and then sends a sample that is wildly wrong (a bus error, a
 saturated conversion). One such sample dominates a window's correlations and spectra:
@@ -25,7 +26,11 @@ not a glitch but a faulty sensor: the window is refused.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+from rozyn_estimator.method.config import PipelineConfig
 
 GLITCH_Z = 20.0  # robust standard deviations, for both tests
 NEIGHBOURS = 4  # compared on each side of a candidate
@@ -91,3 +96,37 @@ def _robust_std(x: np.ndarray) -> float:
         return mad
     steps = deviation[deviation > 0]
     return float(steps.min()) if steps.size else 0.0
+
+
+class InputError(Exception):
+    """The window cannot be used (becomes a failed status)."""
+
+
+def checked_window(
+    y: np.ndarray, fs_hz: float, cfg: PipelineConfig, names: tuple[str, ...] = ("front", "rear")
+) -> tuple[np.ndarray, tuple[int, ...]]:
+    """(the window demeaned, with glitches gated; how many per channel); one column per name.
+
+    Raises:
+        InputError: the window cannot be used (the message says why).
+    """
+    if not (isinstance(fs_hz, int | float) and math.isfinite(fs_hz) and fs_hz > 0):
+        raise InputError(f"sample rate must be a positive number, got {fs_hz!r}")
+    if y.ndim != 2 or y.shape[1] != len(names):
+        raise InputError(f"expected accelerations of shape (n, {len(names)}), got {y.shape}")
+    if not np.issubdtype(y.dtype, np.number) or np.iscomplexobj(y):
+        raise InputError(f"expected real numbers, got dtype {y.dtype}")
+    y = y.astype(float, copy=False)
+    if not np.all(np.isfinite(y)):
+        raise InputError(f"{int(np.sum(~np.isfinite(y)))} samples are NaN or Inf")
+    if y.shape[0] < cfg.min_duration_s * fs_hz:
+        raise InputError(f"window too short: {y.shape[0] / fs_hz:.2f} s < {cfg.min_duration_s:g} s")
+    try:
+        y, gated = gate_glitches(y, names)
+    except GlitchError as exc:
+        raise InputError(str(exc)) from None
+    y = y - y.mean(axis=0)
+    for i, name in enumerate(names):
+        if not np.any(np.abs(y[:, i]) > 1e-9):
+            raise InputError(f"{name} channel is constant: no vibration to identify")
+    return y, gated

@@ -18,8 +18,10 @@ from collections.abc import Callable
 import numpy as np
 from scipy import signal
 
-from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
+from rozyn_estimator.body_model import AnyVehicle
+from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.vehicle import Vehicle
+from rozyn_estimator.vehicle_full import FullVehicle
 
 
 def stage_vehicle(vehicle: Vehicle) -> Vehicle:
@@ -40,32 +42,50 @@ def stage_input(y: np.ndarray, fs_hz: float, vehicle: Vehicle) -> tuple[np.ndarr
     return y[:, :1] + (x - axles) * pitch_accel[:, None], stage_vehicle(vehicle)
 
 
-def gyro_sign_problem(y: np.ndarray, fs_hz: float, vehicle: Vehicle, speed_mps: float | None) -> str | None:
-    """Why an IMU's pitch gyro cannot be used (None: it can): it reads the pitch rate with the sign
-    opposite to REP 103's. The accelerometer/gyro cross-spectrum over the body modes (0.5-4 Hz)
-    is compared with the model's at the vehicle file's values: a flipped axis turns it half round
-    (a correlation of about -1, where the right sign gives +1). Fitted anyway, a flipped gyro
-    read as a speed 0.4x the topic's and Rozyn's stage as m +12 %, l_f +75 %."""
-    if not vehicle.pitch_gyro or not speed_mps:
+def gyro_sign_problem(y: np.ndarray, fs_hz: float, vehicle: AnyVehicle,
+                      speed_mps: float | None) -> str | None:
+    """Why a gyro cannot be used (None: every one can), either car: it reads its rate with the sign
+    opposite to REP 103's. Each gyro's cross-spectra with the accelerometers over the body modes
+    (0.5-4 Hz) are compared with the model's at the vehicle file's values: a flipped axis turns
+    them half round (a correlation of about -1, where the right sign gives +1). Fitted anyway, a
+    flipped pitch gyro read as a speed 0.4x the topic's and the half car's Rozyn stage as m +12 %,
+    l_f +75 %."""
+    kinds = vehicle.channel_kinds
+    gyros = [i for i, kind in enumerate(kinds) if kind != "accel_z"]
+    accels = [i for i, kind in enumerate(kinds) if kind == "accel_z"]
+    if not gyros or not accels or not speed_mps:
         return None
 
     def model_cross(freq_hz: np.ndarray) -> np.ndarray:
-        model = HalfCarSpectrum(vehicle, freq_hz, fs_hz, float(speed_mps), aliases=0)
-        v = vehicle
-        nominal = np.array([v.sprung_mass_kg, v.pitch_inertia_kgm2, v.cog_from_front_axle_m])
-        S, _ = model.spectrum(model.theta(nominal, 1.0, np.full(2, 1e-12)), derivatives=False, smooth=False)
-        return S[:, :1, 1:]
+        model = FullCarSpectrum(vehicle, range(len(kinds)), freq_hz, fs_hz, float(speed_mps), aliases=0)
+        theta = model.theta(_nominal(vehicle), 1.0, np.full(len(kinds), 1e-12))
+        S, _ = model.spectrum(theta, derivatives=False)
+        return S[:, accels][:, :, gyros]
 
-    scores = sign_scores(y, fs_hz, [0], [1], model_cross)
-    if scores is None or scores[0] > SIGN_SCORE:
+    scores = sign_scores(y, fs_hz, accels, gyros, model_cross)
+    if scores is None:
         return None
-    score = float(scores[0])
-    label = vehicle.channel_names[1]
-    return (f"{label} reads the pitch rate with the sign opposite to REP 103's (angular_velocity.y positive "
-            f"when the nose dips; its cross-spectrum with the accelerometer correlates {score:+.2f} with the "
-            "model's): check the IMU's frame (x forward, y left, z up)")
+    flipped = [(vehicle.channel_names[g], kinds[g], s) for g, s in zip(gyros, scores, strict=True)
+               if s <= SIGN_SCORE]
+    if not flipped:
+        return None
+    label, kind, score = flipped[0]
+    motion, convention = _AXES[kind]
+    return (f"{label} reads the {motion} rate with the sign opposite to REP 103's ({convention}; its "
+            f"cross-spectrum with the accelerometer correlates {score:+.2f} with the model's): check the "
+            "IMU's frame (x forward, y left, z up)")
 
 
+def _nominal(v: AnyVehicle) -> np.ndarray:
+    """The vehicle file's body parameters in the model's order (:mod:`..body_parameters`)."""
+    if isinstance(v, FullVehicle):
+        return np.array([v.sprung_mass_kg, v.roll_inertia_kgm2, v.pitch_inertia_kgm2, v.cog_from_front_axle_m,
+                         v.cog_lateral_m])
+    return np.array([v.sprung_mass_kg, v.pitch_inertia_kgm2, v.cog_from_front_axle_m])
+
+
+_AXES = {"gyro_x": ("roll", "angular_velocity.x positive when the left side rises"),
+         "gyro_y": ("pitch", "angular_velocity.y positive when the nose dips")}
 SIGN_SCORE = -0.5  # the right sign correlates about +1 and noise about 0; a flipped axis about -1
 
 

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import math
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -29,17 +28,17 @@ import numpy as np
 
 from rozyn_estimator.method.budget import Budget, Calibration, rozyn_contributions
 from rozyn_estimator.method.config import PARAM_NAMES, PipelineConfig
-from rozyn_estimator.method.correlation import correlation_sums
+from rozyn_estimator.method.correlation import correlation_sums, lag_range
 from rozyn_estimator.method.drive import constant_speed_only, varying_drive, window_speed
 from rozyn_estimator.method.fit import axle_shapes, characteristic_matrix, fit_inertia
-from rozyn_estimator.method.glitches import GlitchError, gate_glitches
+from rozyn_estimator.method.full.refine import refine_full
+from rozyn_estimator.method.full.result import FullRefinement
+from rozyn_estimator.method.glitches import InputError, checked_window
 from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
 from rozyn_estimator.method.imu import gyro_sign_problem, stage_input, stage_vehicle
-from rozyn_estimator.method.likelihood import Refinement, refine
 from rozyn_estimator.method.load_transfer import carries_load_transfer, fit_without_load_transfer
 from rozyn_estimator.method.variance import jackknife_covariance
 from rozyn_estimator.vehicle import Vehicle
-from rozyn_estimator.vehicle_full import FullVehicle
 
 
 @dataclass(frozen=True)
@@ -66,10 +65,9 @@ class Estimate:
     notes: tuple[str, ...] = field(default=())
     stage: str = "rozyn"
     rozyn: Estimate | None = None
-    refinement: Refinement | None = None
+    refinement: FullRefinement | None = None
     budget: Budget | None = None  # the covariance's statistical and systematic parts
     glitches: tuple[int, ...] = (0, 0)  # samples gated as glitches (front, rear): method/glitches.py
-    guard_std: np.ndarray | None = None  # (3,) Rozyn's std the refinement's guard had (carried on)
 
     @property
     def ok(self) -> bool:
@@ -114,10 +112,6 @@ class Estimate:
         if self.budget is not None:
             out["budget"] = self.budget.to_dict()
         return out
-
-
-class InputError(Exception):
-    """The window cannot be used (becomes a failed status)."""
 
 
 def estimate(
@@ -176,14 +170,6 @@ def _without_variance(cfg: PipelineConfig) -> PipelineConfig:
     return cfg.replace(variance="none")
 
 
-def _carried_guard_std(warm_start: Estimate | np.ndarray | None) -> np.ndarray | None:
-    """The previous refined update's guard std (the windows overlap: it serves this one's)."""
-    if not isinstance(warm_start, Estimate) or warm_start.guard_std is None:
-        return None
-    std = warm_start.guard_std
-    return std if np.all(np.isfinite(std)) else None
-
-
 def _rozyn_stage(
     y: np.ndarray, fs_hz: float, vehicle: Vehicle, cfg: PipelineConfig, speed_mps: float | None,
     started: float,
@@ -234,47 +220,37 @@ def _refined(
     y: np.ndarray, fs_hz: float, vehicle: Vehicle, cfg: PipelineConfig, speed_mps: float | None,
     speed: float | np.ndarray | None, warm_start: Estimate | np.ndarray | None, started: float,
 ) -> Estimate:
-    """The likelihood refinement after Rozyn's stage, with its fallbacks.
+    """The likelihood refinement (:func:`~rozyn_estimator.method.full.refine.refine_full`, the
+    one for every car) after Rozyn's stage, with its fallbacks.
 
-    Rozyn's estimate starts the fit. Its jackknife covariance — most of its stage's time —
-    is needed only by the refinement's guard, when the fit disagrees with Rozyn's estimate
-    by more than 25 % (:func:`refine`; a warm update carries the previous window's std
-    instead), and by the fallback when the refinement fails: it is computed then
-    (``Estimate.rozyn`` has no covariance otherwise).
+    Rozyn's estimate starts the fit (the previous window's optimum, warm). Its jackknife
+    covariance — most of its stage's time — is needed only by the fallback when the
+    refinement fails: it is computed then (``Estimate.rozyn`` has no covariance otherwise).
     """
     quick = _rozyn_stage(y, fs_hz, vehicle, _without_variance(cfg), speed_mps, started)
-    full: list[Estimate] = []
-    carried = _carried_guard_std(warm_start)  # a warm update: the previous window's guard std serves
-
-    def with_variance() -> Estimate:
-        if not full:
-            jackknife = cfg.variance != "none"
-            full.append(_rozyn_stage(y, fs_hz, vehicle, cfg, speed_mps, started) if jackknife else quick)
-        return full[0]
-
     n = quick.n_samples
-    warm = _warm(warm_start)
+    start = quick.params if quick.ok else _warm_params(warm_start)
     if speed is None:
-        ref = Refinement(status="failed", reason="the speed is unknown (it sets the wheelbase delay)")
+        ref = FullRefinement(status="failed", reason="the speed is unknown (it sets the wheelbase delay)")
     else:
-        ref = refine(y, fs_hz, vehicle, quick.params, speed, cfg.likelihood, warm=warm,
-                     start_std=carried if carried is not None else lambda: with_variance().statistical_std)
-    rozyn = with_variance() if full or not ref.ok else quick
-    guard_std = carried if carried is not None else (rozyn.statistical_std if full else None)
+        ref = refine_full(y, fs_hz, vehicle, (0, 1), start, speed, cfg.likelihood, warm=_warm(warm_start))
+    jackknife = not ref.ok and cfg.variance != "none"
+    rozyn = _rozyn_stage(y, fs_hz, vehicle, cfg, speed_mps, started) if jackknife else quick
     elapsed = (time.perf_counter() - started) * 1e3
     if ref.ok:
-        origin = "the previous estimate" if warm is not None else "a coarse grid"
+        origin = "the previous estimate" if _warm(warm_start) is not None else "a coarse grid"
         notes = () if rozyn.ok else (
             f"Rozyn stage failed ({rozyn.reason}); the likelihood fit started from {origin}",
         )
-        budget = _budget(ref.covariance, ref.contributions, ref.calibration)
+        budget = _budget(ref.covariance, ref.contributions,
+                         () if ref.calibration is None else ref.calibration.calibrations)
         if ref.model_fit is not None and not ref.model_fit.ok:
             notes = (*notes, f"model check: {ref.model_fit.verdict}")
         return Estimate(
             status="ok", params=ref.params, covariance=budget.total if budget else ref.covariance,
             budget=budget, modes=rozyn.modes, a0=rozyn.a0,
             n_samples=n, elapsed_ms=elapsed, notes=notes + ref.notes, stage="likelihood",
-            rozyn=rozyn, refinement=ref, guard_std=guard_std,
+            rozyn=rozyn, refinement=ref,
         )
     if rozyn.ok and (why := varying_drive(ref.reason, speed)):
         return _failed(why, n, started, rozyn=rozyn, refinement=ref)
@@ -295,60 +271,11 @@ def _warm_params(warm_start: Estimate | np.ndarray | None) -> np.ndarray | None:
     return None if warm_start is None else np.asarray(warm_start, dtype=float)
 
 
-def _warm(warm_start: Estimate | np.ndarray | None) -> Refinement | np.ndarray | None:
-    """The previous window's refinement (full θ) or its (m, I, lf), if usable."""
-    if isinstance(warm_start, Estimate):
-        if warm_start.refinement is not None and warm_start.refinement.ok:
-            return warm_start.refinement
-        return warm_start.params if warm_start.ok else None
-    if warm_start is None:
-        return None
-    p = np.asarray(warm_start, dtype=float)
-    return p if p.shape == (3,) and np.all(np.isfinite(p)) else None
-
-
-def checked_window(
-    y: np.ndarray, fs_hz: float, cfg: PipelineConfig, names: tuple[str, ...] = ("front", "rear")
-) -> tuple[np.ndarray, tuple[int, ...]]:
-    """(the window demeaned, with glitches gated; how many per channel); one column per name.
-
-    Raises:
-        InputError: the window cannot be used (the message says why).
-    """
-    if not (isinstance(fs_hz, int | float) and math.isfinite(fs_hz) and fs_hz > 0):
-        raise InputError(f"sample rate must be a positive number, got {fs_hz!r}")
-    if y.ndim != 2 or y.shape[1] != len(names):
-        raise InputError(f"expected accelerations of shape (n, {len(names)}), got {y.shape}")
-    if not np.issubdtype(y.dtype, np.number) or np.iscomplexobj(y):
-        raise InputError(f"expected real numbers, got dtype {y.dtype}")
-    y = y.astype(float, copy=False)
-    if not np.all(np.isfinite(y)):
-        raise InputError(f"{int(np.sum(~np.isfinite(y)))} samples are NaN or Inf")
-    if y.shape[0] < cfg.min_duration_s * fs_hz:
-        raise InputError(f"window too short: {y.shape[0] / fs_hz:.2f} s < {cfg.min_duration_s:g} s")
-    try:
-        y, gated = gate_glitches(y, names)
-    except GlitchError as exc:
-        raise InputError(str(exc)) from None
-    y = y - y.mean(axis=0)
-    for i, name in enumerate(names):
-        if not np.any(np.abs(y[:, i]) > 1e-9):
-            raise InputError(f"{name} channel is constant: no vibration to identify")
-    return y, gated
-
-
-def lag_range(cfg: PipelineConfig, fs_hz: float, v: Vehicle | FullVehicle,
-              speed_mps: float | None) -> tuple[int, int]:
-    """(first, last) correlation lag in samples (the wheelbase delay skipped when asked)."""
-    first_s = cfg.min_lag_s
-    if cfg.skip_wheelbase_delay and speed_mps is not None and speed_mps > 0:
-        first_s = max(first_s, v.wheelbase_m / speed_mps)
-    if not first_s * fs_hz < 1e12:  # a speed so low that no window holds one wheelbase delay
-        raise InputError(f"speed {speed_mps:.3g} m/s: the wheelbase delay {first_s:.3g} s exceeds any window")
-    first = math.ceil(first_s * fs_hz - 1e-9)
-    if cfg.correlation == "multi-reference":
-        first = max(first, 1)  # lag 0 carries the sensor noise variance
-    return first, first + round(cfg.max_lag_s * fs_hz)
+def _warm(warm_start: Estimate | np.ndarray | None) -> FullRefinement | None:
+    """The previous window's refinement (its θ starts this one's), if usable."""
+    if isinstance(warm_start, Estimate) and warm_start.refinement is not None and warm_start.refinement.ok:
+        return warm_start.refinement
+    return None
 
 
 def _decays(corr: np.ndarray, first: int, cfg: PipelineConfig) -> np.ndarray:

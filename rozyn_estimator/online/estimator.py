@@ -49,7 +49,7 @@ import numpy as np
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import Estimate, PipelineConfig
-from rozyn_estimator.method.full import FullEstimate
+from rozyn_estimator.method.full.stage import FullEstimate
 from rozyn_estimator.online.batch import SpeedSamples, as_received, clean_batch
 from rozyn_estimator.online.channel import Channel
 from rozyn_estimator.online.config import OnlineConfig, speed_problem

@@ -45,7 +45,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from rozyn_estimator.method import Estimate
-from rozyn_estimator.method.full import FullEstimate
+from rozyn_estimator.method.full.stage import FullEstimate
 from rozyn_estimator.method.likelihood.road_input import unsteady
 from rozyn_estimator.online.driving import driving_time_s
 from rozyn_estimator.online.records import NS, Job, Update

@@ -16,7 +16,7 @@ from threadpoolctl import ThreadpoolController
 
 from rozyn_estimator.method import Estimate, PipelineConfig, estimate
 from rozyn_estimator.method.drive import speed_spread, window_speed
-from rozyn_estimator.method.full import FullEstimate, estimate_full
+from rozyn_estimator.method.full.stage import FullEstimate, estimate_full
 from rozyn_estimator.online.config import OnlineConfig
 from rozyn_estimator.online.driving import driving_time_s, standing
 from rozyn_estimator.online.pairing import align_channels

@@ -23,7 +23,7 @@ import numpy as np
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS, Estimate, PipelineConfig, estimate
-from rozyn_estimator.method.full import FullEstimate, estimate_full
+from rozyn_estimator.method.full.stage import FullEstimate, estimate_full
 from rozyn_estimator.vehicle import Vehicle, load_vehicle
 from rozyn_estimator.vehicle_full import FullVehicle, load_full_vehicle
 

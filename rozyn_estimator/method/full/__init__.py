@@ -1,8 +1,5 @@
-"""The full car: Rozyn's pipeline and the likelihood refinement on three or four channels (corner
-accelerometers, or a sensors block's: one IMU's accel_z, gyro_x, gyro_y), ROS-free.
-``estimate_full`` runs one window; see :mod:`rozyn_estimator.method.full.stage`."""
-
-from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES
-from rozyn_estimator.method.full.stage import FullEstimate, estimate_full
-
-__all__ = ["FULL_PARAM_NAMES", "FullEstimate", "estimate_full"]
+"""The one likelihood refinement and the full car's Rozyn stage, ROS-free: the vehicle's spectral
+model (:mod:`.spectrum`, either car), its Whittle fit (:mod:`.refine`), calibration and budget
+(:mod:`.uncertainty`); the full car's modal fit (:mod:`.fit`) and its window's update
+(:func:`.stage.estimate_full`). The package imports nothing itself: its modules are imported by
+name (the half car's pipeline imports the refinement without the full car's stage)."""

@@ -74,8 +74,9 @@ def full_model_fit(objective: FullWhittle, theta: np.ndarray, spectra: Spectra, 
     d = spectra.dft / math.sqrt(spectra.n_samples * spectra.fs_hz)
     with np.errstate(divide="ignore", invalid="ignore"):
         try:
-            found = whiteness(S, floors, 2, d, group, objective.counts, base.freq_hz, kappa, components, A,
-                              (hess - np.diag(objective.precision))[np.ix_(free, free)], unknown,
+            tracks = 2 if base.rolls else 1  # the road's inputs
+            found = whiteness(S, floors, tracks, d, group, objective.counts, base.freq_hz, kappa, components,
+                              A, (hess - np.diag(objective.precision))[np.ix_(free, free)], unknown,
                               spectra.window_dft)
         except np.linalg.LinAlgError:
             return not_computable
@@ -84,5 +85,6 @@ def full_model_fit(objective: FullWhittle, theta: np.ndarray, spectra: Spectra, 
     worst = int(np.argmax(found.per_band))
     band = (float(found.edges_hz[worst]), float(min(found.edges_hz[worst + 1], f[-1])))
     p = found.p_value
-    verdict = FITS if p >= ALPHA else misfit("full-car", p, band, found, "the rear sensors")
+    verdict = FITS if p >= ALPHA else misfit("full-car" if base.rolls else "half-car", p, band, found,
+                                             "the rear sensors" if base.rolls else "the rear sensor")
     return ModelFit(found.statistic, found.dof, p, band, verdict, found.dithered)

@@ -216,7 +216,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
     elif calibrating:
         try:
             theta, calibration, posterior = calibrate_vehicle(objective, theta, vehicle, groups, assumed,
-                                                              cfg.max_iter, corners)
+                                                              cfg.max_iter, corners, power)
         except (ValueError, np.linalg.LinAlgError) as exc:  # the first-order budget stands for them
             notes.append(f"calibration failed ({exc}): the tolerances' first-order budget stands")
             run(theta, max(1, cfg.max_iter - iterations), tol=cfg.tol)  # the fit, completed without it
@@ -236,8 +236,13 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
     if not 1e-3 * vehicle.wheelbase_m < lf < (1 - 1e-3) * vehicle.wheelbase_m:
         raise _FitError(f"likelihood fit: CoG at the wheelbase's end (lf = {lf:.4g} m)")
     info = objective.information(theta)  # as the optimiser's Hessian sums it (variances within 1 %)
+    # a noise floor the fit ran to zero (noise-free sensors) is at its boundary, not free: no
+    # information, nothing to carry
+    free = np.ones(theta.size, dtype=bool)
+    free[model.noise_slice] = share > NOISE_AT_ZERO
+    theta_cov = np.zeros_like(info)
     try:
-        theta_cov = np.linalg.inv(info)
+        theta_cov[np.ix_(free, free)] = np.linalg.inv(info[np.ix_(free, free)])
     except np.linalg.LinAlgError as exc:
         raise _FitError("likelihood fit: singular information (a parameter the data do not "
                         "determine)") from exc

@@ -48,8 +48,10 @@ def spectrum_itself(objective: FullWhittle, theta: np.ndarray, freq_hz: np.ndarr
     at ``freq_hz``: interpolated from the model's nodes as the fit's S is, or evaluated there
     when the model has no grid (nearly noise-free data)."""
     model = objective.model
-    if model.grid_hz <= 0:
-        return model.regrid(freq_hz, 0.0, 0.0).spectrum(theta, derivatives=False)[0]
+    if model.grid_hz <= 0:  # beyond the band S is held at its edge's (the road shape's polynomials
+        # would run off there; a short window's taper reaches far, even past 0 Hz)
+        f = np.clip(freq_hz, model.freq_hz.min(), model.freq_hz.max())
+        return model.regrid(f, 0.0, 0.0).spectrum(theta, derivatives=False)[0]
     first_node_hz = model.omega[0] / (2.0 * np.pi)
     return apply(lagrange_matrix((freq_hz - first_node_hz) / model.grid_hz, model.n_freq),
                  objective.node_spectrum(theta))

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from rozyn_estimator.method import METHODS, PipelineConfig, estimate
-from rozyn_estimator.method.full import estimate_full
+from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.tools.options import with_sensor_preset
 from rozyn_estimator.tools.trial.run import limit_threads

@@ -28,7 +28,7 @@ import numpy as np
 from rozyn_estimator.bag import BagReader, BagWriter
 from rozyn_estimator.errors import BagError
 from rozyn_estimator.method import Estimate
-from rozyn_estimator.method.full import FullEstimate
+from rozyn_estimator.method.full.stage import FullEstimate
 from rozyn_estimator.online import (
     CUSTOM_DATA_KEY,
     HALF_LAYOUT,
