@@ -33,14 +33,6 @@ run acceptance-table5-1 --suite acceptance --methods rozyn,likelihood
 run acceptance-second-vehicle --suite acceptance --vehicle-preset second --methods rozyn,likelihood
 run robustness --suite robustness --methods rozyn,likelihood
 run mismatch --suite mismatch --methods likelihood,rozyn
-suspension="--noise 0.1 --methods likelihood,likelihood-nuisance"
-# shellcheck disable=SC2086
-{
-  run stiffness-plus-10pct $suspension --stiffness-error 0.1
-  run stiffness-minus-10pct $suspension --stiffness-error -0.1
-  run damping-plus-10pct $suspension --damping-error 0.1
-  run damping-minus-10pct $suspension --damping-error -0.1
-}
 full="--model full"
 # shellcheck disable=SC2086
 {

@@ -1,8 +1,8 @@
-"""One spectral model for every car: the half car through the full car's model (two corners on
-the centreline, one track, the body's heave and pitch) is the half car's own model, its
-spectral matrix and every derivative, at a constant and a varying speed, with the weight
-through the geometry, for two accelerometers and for one IMU, and with the sensors' and the
-corners' calibrations."""
+"""One spectral model for every car: the half car is its two-corner case on the centreline (one
+track, the body's heave and pitch). Checked against the simulator's plant (its state space, an
+independent implementation of the equations of motion) and against finite differences of
+itself, at a constant and a varying speed, with the weight through the geometry, for two
+accelerometers and for one IMU, and with the sensors' and the corners' calibrations."""
 
 import numpy as np
 import pytest
@@ -10,92 +10,94 @@ import pytest
 from rozyn_estimator.method.body_parameters import BodyParameters
 from rozyn_estimator.method.full.fit import corner_value_count
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
-from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
+from rozyn_estimator.method.full.uncertainty.moves import values_of
 from rozyn_estimator.sensors import sensors_from_mapping
 from rozyn_estimator.vehicle import Vehicle
+from sim_node.vehicle_plant import state_space
 
 FS_HZ = 100.0
-FREQ_HZ = np.linspace(0.5, 20.0, 240)
+FREQ_HZ = np.linspace(0.5, 20.0, 120)
 VARYING_MPS = np.r_[np.full(3000, 8.0), np.linspace(8.0, 22.0, 6000), np.full(3000, 22.0)]
 GEOMETRY = dict(cog_height_m=0.55, wheel_centre_height_m=0.3)
 IMU = {"names": ["imu"],
        "imu": {"topic": "/imu/data", "x_m": 1.5, "y_m": 0.0, "channels": ["accel_z", "gyro_y"]}}
 PARAMS = np.array([950.0, 1400.0, 1.3])  # m, I_yy, l_f
-# the half car's θ names for the one model's
-SAME = {"ln_pitch_inertia": "ln_inertia", "ln_noise_0": "ln_noise_front", "ln_noise_1": "ln_noise_rear",
-        "ln_gain_1": "ln_rear_gain", "delay_ms": "time_offset_ms"}
 
 
-def _models(v: Vehicle, speed, **half) -> tuple[HalfCarSpectrum, np.ndarray, FullCarSpectrum, np.ndarray]:
-    h = HalfCarSpectrum(v, FREQ_HZ, FS_HZ, speed, aliases=1, estimate_waviness=True, road_shape_terms=2,
-                        **half)
-    one = FullCarSpectrum(v, (0, 1), FREQ_HZ, FS_HZ, speed, aliases=1, road_shape_terms=2)
-    th_h = h.theta(PARAMS, 3e-6, np.array([1e-4, 2e-4]), waviness=2.3)
-    th_h[h.shape_slice] = [0.2, -0.1]
-    th_one = one.theta(PARAMS, 3e-6, np.array([1e-4, 2e-4]))
-    th_one[one.waviness_index] = 2.3
-    th_one[one.shape_slice] = [0.2, -0.1]
-    return h, th_h, one, th_one
+def _vehicle(sensors: dict | None = None) -> Vehicle:
+    v = Vehicle(sensor_front_offset_m=0.2, sensor_rear_offset_m=-0.3, **GEOMETRY)
+    return v if sensors is None else v.with_sensors(sensors_from_mapping(sensors))
 
 
-def _close(a: np.ndarray, b: np.ndarray) -> None:
-    np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12 * float(np.max(np.abs(a))))
+def _theta(model: FullCarSpectrum, params: np.ndarray = PARAMS) -> np.ndarray:
+    theta = model.theta(params, 3e-6, np.array([1e-4, 2e-4]))
+    theta[model.waviness_index] = 2.3
+    theta[model.shape_slice] = [0.2, -0.1]
+    return np.r_[theta, np.full(model.n_params - theta.size, 0.01)]  # calibrated values, if any
+
+
+@pytest.mark.parametrize("sensors", [None, IMU], ids=["two accelerometers", "one IMU"])
+def test_the_half_car_is_the_simulators_transfer_function(sensors):
+    """G = iω P D⁻¹ Bᵀ T per unit road velocity at each wheel equals the plant's state space
+    (the road under each wheel in, the channels out) divided by iω."""
+    v = _vehicle(sensors)
+    model = FullCarSpectrum(v, (0, 1), FREQ_HZ, FS_HZ, 20.0, aliases=0)
+    truth = np.array([v.sprung_mass_kg, v.pitch_inertia_kgm2, v.cog_from_front_axle_m])
+    theta = model.theta(truth, 1.0, np.ones(2))
+    ss = state_space(v)
+    w = 2 * np.pi * FREQ_HZ
+    eye = np.eye(ss.a.shape[0])
+    plant = np.array([ss.c @ np.linalg.solve(1j * wi * eye - ss.a, ss.b) + ss.d for wi in w])
+    M, _ = model.body.mass_matrix(theta)
+    D = model.body_stiffness + model.body.gravity_stiffness(theta) - (w**2)[:, None, None] * M
+    G = model.sensing @ np.linalg.solve(D, model.body_input)
+    assert model.names[:3] == ["ln_mass", "ln_pitch_inertia", "logit_cog"]
+    assert "ln_coherence_scale" not in model.names  # one track
+    assert np.max(np.abs(G * (1j * w)[:, None, None] - plant)) < 1e-9 * np.max(np.abs(plant))
 
 
 @pytest.mark.parametrize("speed", [27.0, VARYING_MPS], ids=["constant", "varying"])
-@pytest.mark.parametrize("sensors", [None, IMU], ids=["two accelerometers", "one IMU"])
-def test_the_half_car_is_the_one_models_two_corner_case(speed, sensors):
-    v = Vehicle(sensor_front_offset_m=0.2, sensor_rear_offset_m=-0.3, **GEOMETRY)
-    if sensors is not None:
-        v = v.with_sensors(sensors_from_mapping(sensors))
-    h, th_h, one, th_one = _models(v, speed)
-    assert one.names == ["ln_mass", "ln_pitch_inertia", "logit_cog", "ln_road", "waviness", "road_shape_2",
-                         "road_shape_3", "ln_noise_0", "ln_noise_1"]
-    np.testing.assert_allclose(one.physical(th_one), h.physical(th_h), rtol=1e-12)
-    S_h, dS_h = h.spectrum(th_h)
-    S_one, dS_one = one.spectrum(th_one)
-    _close(S_h, S_one)
-    for name in one.names:
-        _close(dS_h[h.index[SAME.get(name, name)]], dS_one[one.index[name]])
+@pytest.mark.parametrize(("sensors", "calibrate"), [(None, ("gain", "x", "delay")), (IMU, ("gain", "delay"))],
+                         ids=["two accelerometers", "one IMU"])
+def test_every_derivative_of_the_half_car_is_its_slope(speed, sensors, calibrate):
+    model = FullCarSpectrum(_vehicle(sensors), (0, 1), FREQ_HZ, FS_HZ, speed, aliases=1, road_shape_terms=2,
+                            calibrate=calibrate)
+    theta = _theta(model)
+    _, dS = model.spectrum(theta)
+    assert dS is not None
+    for j, name in enumerate(model.names):
+        step = np.zeros_like(theta)
+        step[j] = 1e-6
+        slope = (model.spectrum(theta + step, False)[0] - model.spectrum(theta - step, False)[0]) / 2e-6
+        assert np.max(np.abs(slope - dS[j])) < 1e-5 * np.max(np.abs(dS[j])) + 1e-30, name
 
 
-def test_the_rear_sensors_gain_and_delay_calibrate_alike():
-    """The half car's rear gain and delay are the one model's second gain and its delay."""
-    v = Vehicle(**GEOMETRY)
-    h, th_h, one, th_one = _models(v, 27.0, calibrate_gain=True, calibrate_time_offset=True)
-    one = one.calibrating(("gain", "delay"))
-    th_one = np.r_[th_one, np.zeros(len(one.names) - th_one.size)]
-    th_h[h.index["ln_rear_gain"]] = th_one[one.index["ln_gain_1"]] = 0.05
-    th_h[h.index["time_offset_ms"]] = th_one[one.index["delay_ms"]] = 3.0
-    S_h, dS_h = h.spectrum(th_h)
-    S_one, dS_one = one.spectrum(th_one)
-    _close(S_h, S_one)
-    for name in ("ln_gain_1", "delay_ms", "ln_mass"):
-        _close(dS_h[h.index[SAME.get(name, name)]], dS_one[one.index[name]])
-
-
-def test_the_corners_derivatives_are_the_half_cars_corner_terms():
-    """The one model's derivative along a corner value is the half car's along its log scale
-    (the value times it): suspension, tyre and wheel of each axle."""
-    terms = ("stiffness", "damping", "tyre_stiffness", "tyre_damping", "unsprung_mass")
-    v = Vehicle(**GEOMETRY)
-    h, th_h, one, th_one = _models(v, 27.0, corner_terms=terms)
-    _, dS_h = h.spectrum(th_h)
-    base = np.array([v.suspension_stiffness_front_npm, v.suspension_stiffness_rear_npm,
-                     v.suspension_damping_front_nspm, v.suspension_damping_rear_nspm,
-                     v.tyre_stiffness_front_npm, v.tyre_stiffness_rear_npm,
-                     v.tyre_damping_front_nspm, v.tyre_damping_rear_nspm,
-                     v.unsprung_mass_front_kg, v.unsprung_mass_rear_kg])
-    assert corner_value_count(v) == base.size
-    got = one.to_targets(one.corner_derivatives(th_one, np.diag(base)))
-    for i, term in enumerate(terms):
+def test_the_corners_derivatives_are_the_half_cars_slopes():
+    """Along each corner value (spring, damper, tyre, wheel of each axle) the model's analytic
+    derivative is its change with the vehicle moved."""
+    v = _vehicle()
+    model = FullCarSpectrum(v, (0, 1), FREQ_HZ, FS_HZ, 27.0, aliases=1, road_shape_terms=2)
+    theta = _theta(model)
+    base = values_of(v)
+    assert corner_value_count(v) == base.size == 10
+    got = model.to_targets(model.corner_derivatives(theta, np.diag(base)))
+    fields = ("suspension_stiffness", "suspension_damping", "tyre_stiffness", "tyre_damping", "unsprung_mass")
+    units = ("npm", "nspm", "npm", "nspm", "kg")
+    for i, (field, unit) in enumerate(zip(fields, units, strict=True)):
         for j, corner in enumerate(("front", "rear")):
-            _close(dS_h[h.index[f"ln_{term}_{corner}"]], got[2 * i + j])
+            name = f"{field}_{corner}_{unit}"
+            value = getattr(v, name)
+            moved = []
+            for h in (1e-6, -1e-6):
+                with model.assuming(v.replace(**{name: value * (1 + h)})):
+                    moved.append(model.spectrum(theta, False)[0])
+            slope = (moved[0] - moved[1]) / 2e-6
+            assert np.max(np.abs(slope - got[2 * i + j])) < 1e-5 * np.max(np.abs(slope)), name
 
 
 def test_the_body_parameters_map_both_ways():
     """θ's body block and the physical parameters are each other's inverse, for both bodies,
-    and the Jacobian is their slope."""
+    and the Jacobian and the mass matrix's derivatives are their slopes."""
     for rolls, params in ((False, PARAMS), (True, np.array([950.0, 420.0, 1400.0, 1.3, 0.03]))):
         body = BodyParameters(2.8, rolls, 0.25, 110.0)
         theta = body.theta(params)

@@ -101,23 +101,12 @@ def test_acceptance(vehicle, index):
     assert 0.89 <= float(np.mean(s.coverage_95)) <= 0.99, (case.label, s.coverage_95)
 
 
-@pytest.mark.slow
-def test_known_stiffness_error_and_the_nuisance_fit():
-    """A +10 % error in the known suspension stiffness biases the mass by several per cent;
-    fitting the suspension as nuisance parameters removes it, at a larger spread."""
-    spec = TrialSpec(amplitudes="gaussian", noise_fraction=0.1, stiffness_error=0.1)
-    results = compare(spec, ["likelihood", "likelihood-nuisance"], SEEDS[:50], jobs=2)
-    fixed, free = summarise(results["likelihood"]), summarise(results["likelihood-nuisance"])
-    assert fixed.bias_pct[0] > 3.0
-    assert np.all(np.abs(free.bias_pct) < 1.0) and free.failures == 0
-    assert np.all(free.std <= np.array([10.0, 25.0, 0.01]))
-
-
 # The mismatch suite's cases on held-out seeds (docs/results.md reports
 # seeds 1-100). Coverage from 100 seeds is a binomial count: as above, a bar of 88 % per
 # parameter (a calibrated interval falls below it with under 0.3 % chance).
 MISMATCH = suite("mismatch", TrialSpec())
-WARNS = {"dampers 2x": 0.80, "rear accelerometer 5 ms": 0.80}  # the model check must warn
+WARNS = {"dampers 2x": 0.80}  # the model check must warn (a sensor late within its tolerance is
+# calibrated and reported, and the model then fits)
 IN_MODEL = "the model itself"  # ... and must not
 
 

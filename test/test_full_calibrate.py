@@ -9,13 +9,13 @@ import dataclasses
 import numpy as np
 import pytest
 
+from rozyn_estimator.method.budget import Calibration
 from rozyn_estimator.method.full import refine
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.full.stage import FullEstimate, estimate_full
 from rozyn_estimator.method.full.uncertainty import calibrate
 from rozyn_estimator.method.full.uncertainty.calibrate import VehicleCalibration, sensor_groups
 from rozyn_estimator.method.full.uncertainty.corners import CornerCalibrating, corner_keys
-from rozyn_estimator.method.likelihood.uncertainty.calibration import Calibration
 from rozyn_estimator.method.pipeline import PipelineConfig
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle

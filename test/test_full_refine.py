@@ -51,8 +51,8 @@ def test_the_model_is_the_simulators_transfer_function():
     eye = np.eye(ss.a.shape[0])
     plant = np.array([ss.c @ np.linalg.solve(1j * wi * eye - ss.a, ss.b) + ss.d for wi in w])
     theta = model.theta(_truth(RAISED), 1.0, np.ones(4))
-    M, _ = model._mass_matrix(theta)
-    D = model.body_stiffness + model.gravity_stiffness(theta) - (w**2)[:, None, None] * M
+    M, _ = model.body.mass_matrix(theta)
+    D = model.body_stiffness + model.body.gravity_stiffness(theta) - (w**2)[:, None, None] * M
     G = model.sensing @ np.linalg.solve(D, model.body_input)
     assert np.max(np.abs(G * (1j * w)[:, None, None] - plant)) < 1e-9 * np.max(np.abs(plant))
 

@@ -185,7 +185,6 @@ def test_a_study_of_one_model_is_not_continued_as_the_other(fast, tmp_path, caps
 
 @pytest.mark.parametrize(("argv", "message"), [
     (["--method", "thesis"], "method: the full car has likelihood, rozyn, got 'thesis'"),
-    (["--method", "likelihood-nuisance"], "the full car has likelihood, rozyn"),
     (["--vehicle", "config/vehicle.yaml"], "config/vehicle.yaml: a half-car vehicle file"),
 ])
 def test_what_the_full_car_cannot_study_is_refused(argv, message, tmp_path, capsys):

@@ -16,12 +16,18 @@ from rozyn_estimator.method.likelihood.whiteness import (
     Whiteness,
     absorbed,
     dither_factor,
-    dither_power,
     dithered,
     whiteness,
 )
 
 F = np.linspace(0.5, 15.0, 1700)
+
+
+def dither_power(S: np.ndarray, floors: np.ndarray, rank: int,
+                 unknown: np.ndarray | None = None) -> np.ndarray:
+    """The dither's spectral matrix ``C Cᴴ`` (zero where there is none)."""
+    C = dither_factor(S, floors, rank, unknown)
+    return np.zeros_like(S) if C is None else C @ np.conj(np.swapaxes(C, -1, -2))
 
 
 def _spectrum(small: float = 1e-4, floor: float = 0.0) -> tuple[np.ndarray, np.ndarray]:

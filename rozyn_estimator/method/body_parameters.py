@@ -100,6 +100,11 @@ class BodyParameters:
         d_roll = np.diag([0.0, 0.0, values[1]])
         return M, np.array([d_mass, d_roll, d_pitch, d_logit, m * (d_yc + d_yc.T)])
 
+    def swing_slope(self, theta: np.ndarray) -> float:
+        """d(μ h²)/d(the unsprung masses together): how a wheel's mass moves the rotations' inertia."""
+        m = math.exp(theta[0])
+        return (m / (m + self.unsprung_total_kg)) ** 2 * self.gravity_height_m**2
+
     def gravity_stiffness(self, theta: np.ndarray) -> np.ndarray:
         """The weight's stiffness ``-m g h`` on the rotations (b, b), also its ln m derivative."""
         k = rotation_stiffness_nmprad(math.exp(theta[0]), self.gravity_height_m)

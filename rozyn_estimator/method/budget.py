@@ -7,10 +7,11 @@ Every assumed value ``β_j`` with a tolerance ``u_j`` (a standard uncertainty, s
 when it is one standard uncertainty off; the systematic covariance is ``Σ_j c_j c_jᵀ``
 (the values independent) and the published covariance the sum of both parts. The
 sensitivities are exact derivatives of each stage: of the refinement's optimum
-(:mod:`rozyn_estimator.method.likelihood.uncertainty.sensitivity`) and of Rozyn's linear fit
+(:mod:`rozyn_estimator.method.full.uncertainty.refine_budget`) and of Rozyn's linear fit
 (:func:`rozyn_contributions`, central differences of the fit on the measured modes).
-Values the data calibrate themselves (the sensors' relative gain and time offset in the
-refinement) are in its statistical part instead, with their tolerance as prior.
+Values the data calibrate themselves (:class:`Calibration`: the sensors' gains, positions and
+timing, the corners' values, with their tolerances as priors) contribute what their posterior
+leaves (:mod:`rozyn_estimator.method.full.uncertainty.calibrate`).
 """
 
 from __future__ import annotations
@@ -26,9 +27,41 @@ import numpy as np
 from rozyn_estimator.method.config import PARAM_NAMES
 from rozyn_estimator.method.fit import fit_inertia
 from rozyn_estimator.method.identification import IdentificationError, Mode
-from rozyn_estimator.method.likelihood.uncertainty.calibration import Calibration
 from rozyn_estimator.tolerances import RELATIVE_FIELDS
 from rozyn_estimator.vehicle import Vehicle
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """A value the data calibrated (a nuisance of the refinement with its tolerance as prior).
+
+    ``name``: a tolerance key (``suspension_damping_front_nspm`` …, ``sensor_time_offset_s``)
+    or a sensor's value (``sensor_gain_rear``, ``sensor_x_front_m``). ``estimate``, ``std`` and
+    ``tolerance`` are the departure from the vehicle file's value: seconds for the time
+    offset, a share of the value otherwise.
+    """
+
+    name: str
+    estimate: float
+    std: float  # posterior standard deviation
+    tolerance: float  # the prior's standard deviation
+
+    @property
+    def identified(self) -> bool:
+        """The data pin it down: its posterior std is under half its tolerance."""
+        return self.std < 0.5 * self.tolerance
+
+    def text(self) -> str:
+        scale, unit = {"s": (1e3, "ms"), "m": (1e3, "mm"), "rad": (57.29577951308232, "°")}.get(
+            self.name.rsplit("_", 1)[-1], (100.0, "%"))
+        verdict = "identified by the data" if self.identified else "not identified: its tolerance stands"
+        return (f"{self.estimate * scale:+.3g} ± {self.std * scale:.2g} {unit} "
+                f"(tolerance {self.tolerance * scale:.2g} {unit}; {verdict})")
+
+    def to_dict(self) -> dict[str, object]:
+        return {"name": self.name, "estimate": self.estimate, "std": self.std, "tolerance": self.tolerance,
+                "identified": self.identified}
+
 
 STATISTICS = "statistics"
 # contributor groups, as a user reads them ("mass std 12 kg: tyre stiffness 9, …")

@@ -80,11 +80,6 @@ METHODS: dict[str, PipelineConfig] = {
         gamma=2, correlation="thesis-acf", stiffness_model="eq2-21", fit="stiffness-block",
         freq_band_hz=(1.0, 3.0), damping_band=(0.1, 0.5), skip_wheelbase_delay=False, refine="none",
     ),
-    # Rozyn's pipeline, then the Whittle fit of the half car (likelihood.py).
+    # Rozyn's pipeline, then the Whittle fit of the whole vehicle (method/full/refine.py).
     "likelihood": PipelineConfig(),
-    # ... on the auto-spectra only (for comparison: the cross-spectrum carries most information).
-    # Without the cross-spectrum, a free road shape is too close to the transfer functions'.
-    "likelihood-auto": PipelineConfig(likelihood=LikelihoodConfig(spectra="auto", road_shape_terms=0)),
-    # ... with the road's waviness and the suspension stiffness and damping as nuisance parameters.
-    "likelihood-nuisance": PipelineConfig(likelihood=LikelihoodConfig(estimate_suspension=True)),
 }

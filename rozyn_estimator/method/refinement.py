@@ -1,7 +1,6 @@
-"""What a likelihood refinement returns, for either car: :class:`LikelihoodResult`, the fields the
-half car's (:class:`~rozyn_estimator.method.likelihood.fit.Refinement`) and the full car's
-(:class:`~rozyn_estimator.method.full.result.FullRefinement`) results share (each adds its
-model check and sandwich ratio, whose types live with the likelihood)."""
+"""What the likelihood refinement returns, for either car: :class:`LikelihoodResult`, the fields
+of its result (:class:`~rozyn_estimator.method.full.result.FullRefinement` adds the model check,
+the sandwich ratio and the calibration, whose types live with the likelihood)."""
 
 from __future__ import annotations
 

@@ -1,13 +1,13 @@
-"""Does the full-car model describe the data? The goodness-of-fit check of each refined update.
+"""Does the vehicle model describe the data? The goodness-of-fit check of each refined update.
 
-The half car's check (:mod:`rozyn_estimator.method.likelihood.fitcheck`) on k channels: the
-statistic is :func:`rozyn_estimator.method.likelihood.whiteness.whiteness` with the road's
-two tracks (rank 2), over the fit's means of neighbouring bins (a mean counts as the bins
-it holds). Misfit means power or coherence between the corners the model cannot produce:
-suspension or tyre values off the vehicle file's (the full car holds them fixed: its budget
-carries their tolerances at first order), a nonlinear suspension (its forces at combination
-frequencies), a sensor's gain or timing beyond what its tolerance lets the calibration
-absorb, a body that is not rigid between the sensors.
+The check on k channels, either car (:mod:`rozyn_estimator.method.likelihood.fitcheck` holds
+its verdicts): the statistic is :func:`rozyn_estimator.method.likelihood.whiteness.whiteness`
+with the road's inputs (rank 2: the full car's two tracks; 1: the half car's one), over the
+fit's means of neighbouring bins (a mean counts as the bins it holds). Misfit means power or
+coherence between the channels the model cannot produce: suspension or tyre values off the
+vehicle file's or a sensor's gain or timing beyond what their tolerances let the calibration
+absorb, a nonlinear suspension (its forces at combination frequencies), a body that is not
+rigid between the sensors.
 
 Noise-free sensors. Four exact sensors on a rigid body span three motions: the fitted S is
 then singular in the fourth direction. Floors the fit left at zero are taken away and the
@@ -25,8 +25,8 @@ import math
 import numpy as np
 
 from rozyn_estimator.method.full.whittle import FullWhittle
-from rozyn_estimator.method.likelihood.covariance import NOISE_AT_ZERO
 from rozyn_estimator.method.likelihood.fitcheck import ALPHA, FITS, NOT_COMPUTABLE, ModelFit, misfit
+from rozyn_estimator.method.likelihood.guards import NOISE_AT_ZERO
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power
 from rozyn_estimator.method.likelihood.whiteness import whiteness
 

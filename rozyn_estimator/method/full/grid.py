@@ -7,10 +7,11 @@ the taper's spectral window and the group's spread of bins: ``S + m₂ S''/2``
 
 Why a coarse grid. The model's cost is per frequency (and per aliasing term), and S is
 smooth on the scale of the band's bins (a body resonance spans ~60 bins of a 120 s window,
-the wheelbase delay's phase turns once over 10 Hz at 100 km/h). As for the half car
-(:mod:`rozyn_estimator.method.likelihood.grid`, which measured the error: 4e-5 of S at
-0.05 Hz spacing), S is evaluated at equally spaced nodes ``grid_hz`` apart and interpolated
-to the frequencies by Lagrange polynomials through the 8 nearest nodes; interpolation and
+the wheelbase delay's phase turns once over 10 Hz at 100 km/h). S is evaluated at equally
+spaced nodes ``grid_hz`` apart and interpolated to the frequencies by Lagrange polynomials
+through the 8 nearest nodes (degree 7; measured at 0.05 Hz spacing: 4e-5 of S at any speed,
+the estimates moved by 0.002 of their std; cubic polynomials need half that spacing for the
+same error); interpolation and
 smoothing are one sparse matrix, applied to S and to every derivative alike. Nearly
 noise-free data need S at every frequency (the fit checks; :mod:`.refine`).
 """
@@ -22,8 +23,6 @@ from collections.abc import Callable
 
 import numpy as np
 from scipy import sparse
-
-from rozyn_estimator.method.likelihood.grid import lagrange_matrix, map_bins
 
 ALIAS_SPACING_HZ = 0.2  # the aliases' nodes, when the band's are on a grid (every 4th of the default's)
 Linear = Callable[[np.ndarray], np.ndarray]  # stacked (..., F, k, k) -> (..., nodes, k, k)
@@ -108,3 +107,37 @@ def expected_periodogram_m2(taper: np.ndarray, fs_hz: float) -> float:
     taper reaches zero at its ends). Tukey 0.2: 0.71 bin²."""
     w = np.asarray(taper, dtype=float)
     return float(np.sum(np.diff(np.r_[0.0, w, 0.0]) ** 2) / np.sum(w * w) / (4.0 * np.pi**2) * fs_hz**2)
+
+
+def map_bins(op: sparse.csr_array, m: np.ndarray) -> np.ndarray:
+    """``op`` along the frequency axis (-3) of stacked 2x2 matrices; complex values as pairs
+    of reals (the real map on twice the columns: half the work of scipy's complex product)."""
+    moved = np.ascontiguousarray(np.moveaxis(m, -3, 0))
+    flat = moved.reshape(moved.shape[0], -1)
+    out = (op @ flat.view(float)).view(complex) if np.iscomplexobj(flat) else op @ flat
+    return np.moveaxis(out.reshape(op.shape[0], *moved.shape[1:]), 0, -3)
+
+
+def lagrange_matrix(x: np.ndarray, n_nodes: int) -> sparse.csr_array:
+    """(x.size, n_nodes) the interpolation from equally spaced nodes to the positions ``x``
+    (in node spacings; :func:`lagrange_weights`) as a sparse matrix."""
+    first, weights = lagrange_weights(x, n_nodes)
+    cols = first[:, None] + np.arange(weights.shape[1])
+    return sparse.csr_array((weights.ravel(), cols.ravel(), np.arange(0, weights.size + 1, weights.shape[1])),
+                            shape=(x.size, n_nodes))
+
+
+def lagrange_weights(x: np.ndarray, n_nodes: int, points: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """Lagrange interpolation of degree ``points - 1`` from ``n_nodes`` equally spaced nodes
+    to the positions ``x`` (in node spacings from the first node): (first node (n,), weights
+    (n, points)) over the ``points`` nearest nodes (one-sided at the ends; exact at the nodes)."""
+    points = min(points, n_nodes)
+    x = np.asarray(x, dtype=float)
+    first = np.clip(np.floor(x).astype(int) - (points // 2 - 1), 0, n_nodes - points)
+    t = x - first  # position among the nodes first .. first + points - 1
+    nodes = np.arange(points)
+    w = np.ones((x.size, points))
+    for j in nodes:
+        for m in nodes[nodes != j]:
+            w[:, j] *= (t - m) / (j - m)
+    return first, w

@@ -23,9 +23,9 @@ on the Laplace road at 100 km/h, two vehicles: the mass's variance needed a fact
 1.01 and 1.03). The roll inertia draws nearly all its information from the road's own part
 (the tracks' difference): its variance needed 2.0 times the model's, and gets 1.8.
 
-Not the score's time blocks, as the half car's covariance
-(:func:`rozyn_estimator.method.likelihood.covariance.series_block_variances`): the full car's
-took the larger of the blocks' factor and this one before. Measured on 300 roads in each of
+Not the score's time blocks (the score, a quadratic form of the samples, split over ~12 s
+blocks and its variance measured from their spread, as the half car's covariance once had it):
+the full car's took the larger of the blocks' factor and this one before. Measured on 300 roads in each of
 the ten acceptance cases (Gaussian ISO A at 30-100 km/h and the Laplace road, two vehicles),
 the blocks' factors on the Gaussian roads, where 1 is right, averaged 1.07 for the mass,
 1.08 for the pitch inertia, 1.14 for l_f and 0.91 for the roll inertia; the published std

@@ -2,14 +2,13 @@
 the full car's ``(m, I_xx, I_yy, l_f, y_c)`` or the half car's ``(m, I_yy, l_f)``, and their
 covariance, as a :class:`FullRefinement`).
 
-As the half car's (:mod:`rozyn_estimator.method.likelihood.fit`), started from Rozyn's stage
-of the full car: the negative Whittle log-likelihood (:mod:`.whittle`) of the window's
+Started from Rozyn's stage: the negative Whittle log-likelihood (:mod:`.whittle`) of the window's
 periodogram matrices in the band is minimised over θ (:mod:`.spectrum`: the five body
 parameters; the road's intensity, waviness and shape; the tracks' coherence scale; a noise
 floor per sensor) by scipy's trust-region method with the analytic gradient and the Fisher
 information as its Hessian (scoring), until the Newton decrement is below ``tol``.
 
-Work (one update within 3x the half car's): the model is evaluated on a 0.05 Hz grid and
+Work: the model is evaluated on a 0.05 Hz grid and
 interpolated (:mod:`.grid`; ``grid_hz``; at every frequency once a noise floor runs to zero),
 the optimiser's Hessian sums over every 3rd frequency (:mod:`.whittle`), and a cold start is
 first fitted to means over 0.1 Hz (:func:`.means.coarse_fit`), which leaves the fine fit a step
@@ -75,9 +74,8 @@ from rozyn_estimator.method.full.uncertainty.refine_budget import refinement_con
 from rozyn_estimator.method.full.whittle import FullWhittle, ridged, scoring
 from rozyn_estimator.method.information import information_lost
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
-from rozyn_estimator.method.likelihood.covariance import NOISE_AT_ZERO
 from rozyn_estimator.method.likelihood.fitcheck import neighbour_correlation, unsteady_fit
-from rozyn_estimator.method.likelihood.newton import aground
+from rozyn_estimator.method.likelihood.guards import NOISE_AT_ZERO, aground
 from rozyn_estimator.method.likelihood.road_input import steady_window, unsteady
 from rozyn_estimator.method.likelihood.score import SandwichRatio
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, taper_window, window_spectra
@@ -108,8 +106,8 @@ def refine_full(
             RL, RR; the half car's front and rear, 0 and 1).
         start: the start, e.g. Rozyn's estimate; None for a coarse grid's best point.
         speed_mps: the speed [m/s], a number or one per sample.
-        config: the refinement's settings (the half car's: band, taper, aliases, road shape,
-            second start, noise share, iterations, tolerance).
+        config: the refinement's settings (band, taper, aliases, road shape, second start,
+            noise share, iterations, tolerance).
         warm: the previous window's refinement (its θ is the first start).
         spectra: the window's spectra (:func:`window_spectra` of ``accel_mps2`` with the
             config's band and taper) when given, e.g. the periodogram averaged over many records
@@ -271,7 +269,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
     # structure (dampers stiffer in rebound moved l_f by 2 std): their first-order budget stands
     contributions, budget_theta = _contributions(objective, theta, theta_cov, model.vehicle, warm,
                                                  calibration, fit is not None and not fit.ok)
-    # the calibration's step completes the fit's convergence (the half car's tol_calibrated)
+    # the calibration's step completes the fit's convergence (tol_calibrated)
     if objective.decrement(theta) >= (cfg.tol if calibration is None else cfg.tol_calibrated) or \
             (calibration is not None and not calibration.converged):
         notes.append(f"likelihood fit: not converged in {cfg.max_iter} iterations")

@@ -6,8 +6,7 @@ The tapered window's neighbouring DFT ordinates are correlated: ``C_kk' = E[d_k 
 ``∇_i ℓ = Σ_g c_g tr(A_ig (Ī_g - S_g))`` with ``A_ig = S_g⁻¹ ∂_i S_g S_g⁻¹``, is a sum over
 the bins ``Σ_k tr(A_i,g(k) (I_k - S_g(k)))``, whose covariance (Isserlis' theorem for complex
 Gaussian DFT coefficients) is ``Σ_(k,k') Re tr(A_ik C_kk' A_jk' C_k'k)``. Untapered it is the
-Fisher information; tapered it holds what the taper correlates. As the half car's
-(:func:`rozyn_estimator.method.likelihood.score.covariance_sum`), for k×k matrices: the sum over
+Fisher information; tapered it holds what the taper correlates. For k×k matrices: the sum over
 frequency by the midpoint rule (its summand, model quantities only, is smooth in frequency),
 over every lag the window reaches (the far lags' small products add up on short windows).
 
@@ -23,14 +22,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from rozyn_estimator.method.full.grid import apply
+from rozyn_estimator.method.full.grid import apply, lagrange_matrix
 from rozyn_estimator.method.full.whittle import FullWhittle
-from rozyn_estimator.method.likelihood.grid import lagrange_matrix
 from rozyn_estimator.method.likelihood.score import lag_covariances, lag_partners, midpoint_bins
 from rozyn_estimator.method.likelihood.spectra import Spectra
 
 _STEP_HZ = 0.2  # the midpoint rule's spacing (measured against 0.1 Hz: the std within 0.3 %
-# at 120 s and 4 % at 30 s; the half car's 0.1 Hz would double the work)
+# at 120 s and 4 % at 30 s; 0.1 Hz would double the work)
 
 
 def fine_spectrum(objective: FullWhittle, theta: np.ndarray, spectra: Spectra, reach: int) -> np.ndarray:

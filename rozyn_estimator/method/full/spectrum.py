@@ -12,9 +12,10 @@ Per unit road velocity at the four wheels the accelerations are
     G(ω) = iω P D⁻¹ Bᵀ T(ω),   D = Bᵀ Z(ω) B - ω² M,
 
 and the sampled signals' spectral matrix is ``S(f) = σ² Σ_a r(f_a) G(ω_a) R(ω_a) G(ω_a)ᴴ + diag(n)``
-with the half car's road shape ``r`` and aliasing sum (:func:`spatial_band`), a white noise
-floor per sensor, and the wheels' road velocity covariance ``R = [[W Γ, Γ φ̄], [Γ φ, W Γ]]``
-(front wheels, then rear, each left and right): ``φ`` the rear wheels' delay behind the front
+with the road's shape ``r`` (ISO 8608's power law times Legendre departures in log frequency)
+and aliasing sum (:func:`spatial_band`), a white noise floor per sensor, and the wheels' road
+velocity covariance ``R = [[W Γ, Γ φ̄], [Γ φ, W Γ]]`` (front wheels, then rear, each left and
+right; the half car's one track: ``R = [[W, φ̄], [φ, W]]``): ``φ`` the rear wheels' delay behind the front
 ones in their tracks (``W = 1``; a varying drive's mixture: :func:`road_mixture`), ``Γ = [[1,
 γ], [γ, 1]]`` the tracks' coherence: the isotropic surface's (Dodds & Robson 1973; Kamash &
 Robson 1978) for ``w = 2``, ``γ = x K₁(x)``, ``x = 2π n B e^c`` at ``n = f / v``, ``B`` the
@@ -252,14 +253,6 @@ class FullCarSpectrum:
         jac[:, : self.n_body] = self.body.jacobian(theta)
         return jac
 
-    def _mass_matrix(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """M (b, b) and dM/dθ (n_body, b, b); the wheels' swing ``μ h²`` adds to the rotations'."""
-        return self.body.mass_matrix(theta)
-
-    def gravity_stiffness(self, theta: np.ndarray) -> np.ndarray:
-        """The weight's stiffness ``-m g h`` on the rotations (b, b), also its ln m derivative."""
-        return self.body.gravity_stiffness(theta)
-
     # --- the model ----------------------------------------------------------------------
     def spectrum(self, theta: np.ndarray, derivatives: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """S (K, k, k) and, if asked, dS/dθ (n_params, K, k, k); NaN where θ overflows."""
@@ -302,11 +295,11 @@ class FullCarSpectrum:
             return S, None
         dS = np.zeros((self.n_params, self.n_freq, self.k, self.k), dtype=complex)
         # ∂D = -ω² ∂M: ∂H = ω² D⁻¹ ∂M H, so ∂(P H R Hᴴ Pᴴ) = ω² P D⁻¹ ∂M (H R Hᴴ) Pᴴ + h.c.
-        _, dM = self._mass_matrix(theta)
+        _, dM = self.body.mass_matrix(theta)
         Q = (self.omega**2)[:, None, None] * (sensing @ inv_d)
         part = (Q[None] @ dM[:, None]) @ (motion @ herm(sensing))  # (p, F, k, k); matmul: einsum is 4x slower
         if self.gravity_height_m != 0.0:  # ∂D/∂ln m also holds the weight's stiffness: ∂H = -D⁻¹ K_g H
-            part[0] -= (sensing @ inv_d) @ self.gravity_stiffness(theta) @ (motion @ herm(sensing))
+            part[0] -= (sensing @ inv_d) @ self.body.gravity_stiffness(theta) @ (motion @ herm(sensing))
         # the body's, the road shape's and the coherence's derivatives folded in one pass (one
         # sparse product: the same sums as one each, a fraction of the calls)
         shape = self.shape_basis.shape[0]
@@ -337,10 +330,11 @@ class FullCarSpectrum:
         return self.fold(part + herm(part))
 
     def corner_derivatives(self, theta: np.ndarray, directions: np.ndarray) -> np.ndarray:
-        """dS (G, nodes, k, k) at θ along ``directions`` (G, 22) of the corners' values
+        """dS (G, nodes, k, k) at θ along ``directions`` (G, values) of the corners' values
         (:func:`~rozyn_estimator.method.full.fit.corner_response_derivatives`): ``D = Bᵀ Z B -
         ω² M`` and ``Bᵀ T`` move, so ``dH = D⁻¹ (Bᵀ dT - Bᵀ dZ B H)``, and ``d(H R Hᴴ) = dH R Hᴴ
-        + h.c.`` — one batched pass instead of a model evaluation per value."""
+        + h.c.`` — one batched pass instead of a model evaluation per value. The wheels' masses
+        also swing with the rotations (``μ h²`` in ``M``, where the vehicle gives its heights)."""
         inv_d, H, weighted_inputs, motion, _ = self.body_motion(theta)
         B = self.body_map
         sensing = self.sensing_at(theta)  # with θ's calibrated sensors, if it holds them
@@ -348,6 +342,10 @@ class FullCarSpectrum:
         part = corner_response_derivatives(self.vehicle, 1j * self.omega, directions, sensing @ inv_d @ B.T,
                                            B @ motion @ herm(sensing),
                                            weighted_inputs @ herm(H) @ herm(sensing))
+        if slope := self.body.swing_slope(theta):  # ∂M = slope dM_u on the rotations: ∂H = ω² D⁻¹ ∂M H
+            n, rotations = B.shape[0], np.diag([0.0, 1.0, 1.0][: B.shape[1]])
+            swing = (self.omega**2)[:, None, None] * (sensing @ inv_d) @ rotations @ motion @ herm(sensing)
+            part += slope * np.asarray(directions)[:, 4 * n: 5 * n].sum(axis=1)[:, None, None, None] * swing
         return self.fold(part + herm(part))
 
     def sensing_derivatives(self, theta: np.ndarray, d_sensing: np.ndarray) -> np.ndarray:
@@ -365,8 +363,8 @@ class FullCarSpectrum:
         key = theta[: self.noise_slice.start].tobytes()
         if key == self._body_key and self._body_value is not None:
             return self._body_value
-        M, _ = self._mass_matrix(theta)
-        inv_d = np.linalg.inv(self.body_stiffness + self.gravity_stiffness(theta)
+        M, _ = self.body.mass_matrix(theta)
+        inv_d = np.linalg.inv(self.body_stiffness + self.body.gravity_stiffness(theta)
                               - (self.omega**2)[:, None, None] * M)
         H = inv_d @ self.body_input
         weight = self.road_weight(theta)[:, None, None]

@@ -29,10 +29,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rozyn_estimator.method.full.grid import apply
+from rozyn_estimator.method.full.grid import apply, lagrange_matrix
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum, herm
 from rozyn_estimator.method.full.whittle import FullWhittle
-from rozyn_estimator.method.likelihood.grid import lagrange_matrix
 from rozyn_estimator.method.likelihood.road_input import delay_bins, is_varying
 from rozyn_estimator.method.likelihood.spectra import taper_window
 

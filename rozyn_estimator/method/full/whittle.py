@@ -1,8 +1,7 @@
-"""The Whittle objective of the full car (:class:`FullWhittle`): ℓ(θ), its gradient and the
-Fisher information for stacks of k×k spectral matrices.
+"""The Whittle objective (:class:`FullWhittle`, either car): ℓ(θ), its gradient and the Fisher
+information for stacks of k×k spectral matrices:
 
-As the half car's (:mod:`rozyn_estimator.method.likelihood.objective`, which is specialised
-to 2×2 for speed), ``ℓ(θ) = Σ_k log det S_k + tr(S_k⁻¹ I_k)`` over the band's Fourier
+``ℓ(θ) = Σ_k log det S_k + tr(S_k⁻¹ I_k)`` over the band's Fourier
 frequencies, ``∂_i ℓ = Σ_k tr((S⁻¹ - S⁻¹ I S⁻¹) ∂_i S)`` and the Fisher information
 ``F_ij = Σ_k tr(S⁻¹ ∂_i S S⁻¹ ∂_j S)``. With the Cholesky factor ``S = L Lᴴ`` the latter is
 the real inner product of the whitened derivatives ``W_i = L⁻¹ ∂_i S L⁻ᴴ`` (Hermitian):

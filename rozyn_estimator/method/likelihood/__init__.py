@@ -1,38 +1,17 @@
-"""Likelihood refinement: a frequency-domain (Whittle) maximum-likelihood fit of the half car.
+"""What the likelihood refinement (:mod:`rozyn_estimator.method.full.refine`, the one for every
+car) stands on, ROS-free:
 
-Rozyn's pipeline (``pipeline.py``) condenses the data into two modes and fits the
-inertia to them; this stage fits the whole 4-DOF half car to the whole front/rear
-spectral matrix instead, started from Rozyn's estimate.
-
-Modules, by concern (each explains its part):
-
-- ``config``: :class:`LikelihoodConfig`, the settings.
-- ``spectra``: the window's periodogram matrices (:func:`window_spectra`, :class:`Spectra`).
-- ``road_input``: how one road reaches both axles (:func:`delay_characteristic`).
-- ``model``: the half car's spectral matrix and its derivatives (:class:`HalfCarSpectrum`).
-- ``objective``: the Whittle likelihood, its gradient and curvatures (:class:`WhittleObjective`).
-- ``covariance``: the sandwich covariance and the time blocks' score variance.
-- ``fit``: the multi-start fit and its checks (:func:`refine`, :class:`Refinement`).
-- ``uncertainty``: what the vehicle's tolerances add to the covariance, by ``augment``
-  (calibrating the values the data can inform, ``calibration`` reports them) and
-  ``sensitivity`` (propagating the rest).
-- ``fitcheck``: whether the spectra fit the model at all (:func:`model_fit`).
+- ``config``: :class:`LikelihoodConfig`, the settings;
+- ``spectra``: the window's periodogram matrices (:func:`window_spectra`, :class:`Spectra`);
+- ``road_input``: how the road reaches the wheels at a constant or varying speed (the
+  wheelbase delay, the tracks' coherence, a drive's mixture of both);
+- ``score``: the score's lag covariances and the sandwich's ratio a warm update keeps;
+- ``whiteness`` and ``fitcheck``: the model check's statistic and verdicts;
+- ``speedcheck``: the speed topic checked against the wheelbase delay the data show;
+- ``guards``: a noise floor run aground revived, a step backtracked.
 """
 
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
-from rozyn_estimator.method.likelihood.fit import Refinement, refine
-from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
-from rozyn_estimator.method.likelihood.objective import WhittleObjective
-from rozyn_estimator.method.likelihood.road_input import delay_characteristic
 from rozyn_estimator.method.likelihood.spectra import Spectra, window_spectra
 
-__all__ = [
-    "HalfCarSpectrum",
-    "LikelihoodConfig",
-    "Refinement",
-    "Spectra",
-    "WhittleObjective",
-    "delay_characteristic",
-    "refine",
-    "window_spectra",
-]
+__all__ = ["LikelihoodConfig", "Spectra", "window_spectra"]

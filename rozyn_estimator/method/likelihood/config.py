@@ -7,9 +7,6 @@ from typing import ClassVar
 
 from rozyn_estimator.parameters import check, param
 
-SPECTRA = ("cross", "auto")
-COVARIANCES = ("observed", "expected")
-
 
 @dataclass(frozen=True)
 class LikelihoodConfig:
@@ -23,26 +20,16 @@ class LikelihoodConfig:
                                     low=0.0, open_low=True, high=1.0)
     taper: float = param(0.2, "share of the window under a cosine taper",
                          low=0.0, high=1.0)
-    spectra: str = param("cross", "cross (front/rear auto- and cross-spectra) or auto (auto-spectra only)",
-                         choices=SPECTRA)
     aliases: int = param(1, "aliasing terms of the sampled spectrum modelled on each side", low=0, high=5)
     road_max_cpm: float = param(5.0, "the road's profile ends here (a tyre smooths shorter waves away): the "
                                 "aliases hold the road below it only (0: no end)", unit="cycles/m", low=0.0)
-    ramp_s: float = param(6.0, "a varying drive's steady stretches are ramped in and out over this (a raised "
-                          "cosine inside each; 0: cut square)", unit="s", low=0.0, high=60.0)
-    estimate_waviness: bool = param(True, "fit the road's waviness w (ISO 8608 allows w other than 2)")
     road_shape_terms: int = param(4, "smooth departures of the road spectrum from a power law", low=0, high=8)
-    estimate_suspension: bool = param(False, "fit the suspension stiffness and damping (per corner) too")
-    estimate_incoherence: bool = param(False, "fit a share of the road part incoherent between the channels")
     second_start: bool = param(True, "guard against wrong basins: a second start, the lower likelihood wins")
     self_calibrate: bool = param(True, "fit what the data can pin down as nuisances with their tolerances as "
-                                 "priors: suspension stiffness and damping, the rear sensor's gain and delay "
-                                 "relative to the front one (the full car: each sensor's gain and "
-                                 "position, the rear sensors' delay)")
+                                 "priors: each sensor's gain and position, the rear sensors' delay, each "
+                                 "corner's spring, damper, tyre and unsprung mass")
     max_noise_share: float = param(0.5, "a channel fitted as more noise than this share of its power fails",
                                    low=0.0, open_low=True, high=1.0)
-    covariance: str = param("expected", "information in the covariance sandwich: expected or observed",
-                            choices=COVARIANCES)
     grid_hz: float = param(0.05, "the model is evaluated this far apart and interpolated between (0: at "
                            "every Fourier bin)", unit="Hz", low=0.0, high=0.1)
     max_iter: int = param(100, "optimiser iterations per start", low=1)
@@ -50,16 +37,11 @@ class LikelihoodConfig:
                        low=0.0, open_low=True)
     tol_calibrated: float = param(0.05, "convergence when the calibration's Newton step follows (it "
                                   "completes the fit's: measured, the estimates move by < 0.003 std; "
-                                  "the full car's cold fit hands over earlier, within the calibration's "
-                                  "one-step range, and its result is held to this)",
+                                  "a cold fit hands over earlier, within the calibration's one-step "
+                                  "range, and its result is held to this)",
                                   low=0.0, open_low=True)
     noise_start: float = param(1e-3, "the starts' noise floors, share of each channel's band power",
                                low=0.0, open_low=True, high=1.0)
-    block_s: float = param(12.0, "time blocks of the half car's empirical score variance", unit="s",
-                           low=0.0, open_low=True)
-    block_weight: float = param(0.5, "the time blocks' share in the half car's score variance, 0..1 (0: "
-                                "the model's alone; the full car's takes the road's intermittency instead)",
-                                low=0.0, high=1.0)
 
     def __post_init__(self) -> None:
         check(self, (

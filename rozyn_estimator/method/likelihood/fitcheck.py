@@ -30,13 +30,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rozyn_estimator.method.likelihood.covariance import CovarianceError, inverse_information
-from rozyn_estimator.method.likelihood.objective import WhittleObjective, whitened
-from rozyn_estimator.method.likelihood.uncertainty.calibration import Calibration
-from rozyn_estimator.method.likelihood.whiteness import Whiteness, whiteness
+from rozyn_estimator.method.likelihood.whiteness import Whiteness
 
 ALPHA = 1e-3  # a p-value below this: the model does not fit (a WARN)
-Z_DEPARTURE = 4.0  # a calibrated sensor value this many posterior std from nominal: a WARN
 FITS = "fits"
 NOT_COMPUTABLE = ("the model-fit check cannot be computed: the fitted spectral matrix is singular at some "
                   "frequencies (a channel fitted as noise-free)")
@@ -76,73 +72,6 @@ class ModelFit:
 
         return {"statistic": number(self.statistic), "dof": number(self.dof), "p": number(self.p_value),
                 "worst_band_hz": list(self.worst_band_hz), "verdict": self.verdict, "dithered": self.dithered}
-
-
-def model_fit(objective: WhittleObjective, theta: np.ndarray, free: np.ndarray,
-              calibration: tuple[Calibration, ...] = ()) -> ModelFit:
-    """The check at the fit's optimum ``theta`` (``free``: the parameters it adjusted, a mask)."""
-    spectra = objective.spectra
-    if spectra.dft is None:
-        raise ValueError("the model-fit check needs the window's DFT (Spectra.dft)")
-    f = spectra.freq_hz
-    model = objective.model
-    # the full model, also for an auto fit; the fit's own evaluation where it has it at hand
-    cached = not (objective.fast or objective.auto)
-    S, dS = objective.model_at(theta) if cached else model.spectrum(theta, derivatives=True)
-    # a floor the fit ran below the model's fixed one is at its boundary: it measures no noise, so
-    # the check takes it away, and the dither stands for the model's resolution there instead
-    floors = np.exp(theta[4:6]) + model.min_noise_psd
-    zero = np.exp(theta[4:6]) < model.min_noise_psd
-    unknown = np.where(zero, floors, 0.0)
-    S = S - unknown[:, None] * np.eye(2)
-    floors = np.broadcast_to(floors - unknown, (f.size, 2))
-    mask, free = free, np.flatnonzero(free)
-
-    def components(check: np.ndarray | None, at: np.ndarray) -> np.ndarray:
-        # the fit's whitened ∂S rows where the check's S is the fit's (cached by its information)
-        if check is None and cached and not zero.any():
-            rows = objective.whitened_rows(theta)[mask].reshape(free.size, 4, -1)[:, :, at]
-        else:
-            rows = whitened((S if check is None else check)[at], dS[mask][:, at]).reshape(free.size, 4, -1)
-        return rows.transpose(0, 2, 1)
-
-    info = objective.fisher(theta)[np.ix_(free, free)]
-    prior = np.zeros(theta.size) if objective.prior is None else objective.prior.precision
-    try:
-        A = inverse_information(info)
-    except CovarianceError:
-        return ModelFit(math.nan, 0.0, math.nan, (float(f[0]), float(f[-1])), NOT_COMPUTABLE)
-    bins = np.arange(f.size)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        try:
-            found = whiteness(S, floors, 1, spectra.dft / math.sqrt(spectra.n_samples * spectra.fs_hz), bins,
-                              np.ones(f.size), f, neighbour_correlation(spectra.window_dft), components, A,
-                              info - np.diag(prior[free]), unknown, spectra.window_dft)
-        except np.linalg.LinAlgError:  # S (or S and its dither) singular somewhere: never "fits"
-            return ModelFit(math.nan, 0.0, math.nan, (float(f[0]), float(f[-1])), NOT_COMPUTABLE)
-    if not math.isfinite(found.statistic):  # never a verdict from a statistic that is not a number
-        return ModelFit(math.nan, found.dof, math.nan, (float(f[0]), float(f[-1])), NOT_COMPUTABLE)
-    worst = int(np.argmax(found.per_band))
-    band = (float(found.edges_hz[worst]), float(min(found.edges_hz[worst + 1], f[-1])))
-    verdict = _verdict(found.p_value, band, found, calibration)
-    return ModelFit(found.statistic, found.dof, found.p_value, band, verdict, found.dithered)
-
-
-def _verdict(p: float, band: tuple[float, float], found: Whiteness,
-             calibration: tuple[Calibration, ...]) -> str:
-    causes = []
-    for c in calibration:
-        if c.name in ("sensor_time_offset_s", "sensor_gain_ratio") and abs(c.estimate) > Z_DEPARTURE * c.std:
-            if c.name == "sensor_time_offset_s":
-                causes.append(f"sensor timing: the rear sensor lags the front one by {c.estimate * 1e3:.2f} "
-                              f"± {c.std * 1e3:.2f} ms (calibrated; check the sensors' clocks)")
-            else:
-                causes.append(f"sensor gain: the rear sensor reads {c.estimate * 100:+.1f} ± "
-                              f"{c.std * 100:.1f} % relative to the front one (calibrated; check their "
-                              "scale factors)")
-    if p < ALPHA:
-        causes.append(misfit("half-car", p, band, found, "the rear sensor"))
-    return "; ".join(causes) if causes else FITS
 
 
 def misfit(model: str, p: float, band: tuple[float, float], found: Whiteness, late: str) -> str:

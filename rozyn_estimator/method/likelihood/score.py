@@ -1,8 +1,8 @@
-"""The covariance of the Whittle score under the model: :func:`score_covariance`, the sum
-``Σ_(k,k') Re tr(A_ik C_kk' A_jk' C_k'k)`` over the band's pairs of bins, for a tapered
-window whose neighbouring DFT ordinates are correlated (``C_kk'``; see
-:meth:`WhittleObjective.score_covariance`), computed per lag and summed over frequency by
-the midpoint rule.
+"""What the covariance of the Whittle score under the model (:mod:`rozyn_estimator.method.full.score`:
+the sum ``Σ_(k,k') Re tr(A_ik C_kk' A_jk' C_k'k)`` over the band's pairs of bins, for a tapered
+window whose neighbouring DFT ordinates are correlated) is computed with: the lags' covariances
+``C_kk'``, the midpoint rule's bins and partners; and the sandwich's ratio a warm update keeps
+(:class:`SandwichRatio`).
 """
 
 from __future__ import annotations
@@ -14,7 +14,6 @@ import numpy as np
 
 # The sum over frequency takes one bin in this width (the midpoint rule on a smooth summand:
 # measured, within 1e-4 of the covariance at 30-120 s)
-SUM_STEP_HZ = 0.1
 BODY_MOVE = 0.01  # a warm update keeps a sandwich's ratio while the body's θ move less ...
 NUISANCE_MOVE = 0.1  # ... and the others (road, noise floors, shape, calibrated values) less than this
 
@@ -89,41 +88,3 @@ def lag_partners(starts: np.ndarray, counts: np.ndarray, bins: np.ndarray, lags:
     return np.clip(bins[None, :] + lags[:, None], 0, n_bins - 1), weight
 
 
-def _hermitian_numbers(A: np.ndarray) -> np.ndarray:
-    """(..., 4) real numbers (a, d, Re b, Im b) of Hermitian 2x2 ``[[a, b], [b̄, d]]`` (..., 2, 2)."""
-    return np.stack([A[..., 0, 0].real, A[..., 1, 1].real, A[..., 0, 1].real, A[..., 0, 1].imag], axis=-1)
-
-
-def _congruence(C: np.ndarray) -> np.ndarray:
-    """(..., 4, 4) real ``L`` with ``g(Cᴴ A C) = L h(A)`` for Hermitian ``A``, ``h`` its
-    :func:`_hermitian_numbers` and ``g(G) = (G11, G22, 2 Re G12, 2 Im G12)``, so that
-    ``tr(Cᴴ A C A') = g · h(A')``."""
-    x1, x2, y1, y2 = C[..., 0, 0], C[..., 1, 0], C[..., 0, 1], C[..., 1, 1]  # columns x, y of C
-    xx, yy = np.conj(x1) * x2, np.conj(y1) * y2
-    p11, p22, p12, p21 = np.conj(x1) * y1, np.conj(x2) * y2, np.conj(x1) * y2, np.conj(x2) * y1
-    rows = [
-        [np.abs(x1) ** 2, np.abs(x2) ** 2, 2 * xx.real, -2 * xx.imag],
-        [np.abs(y1) ** 2, np.abs(y2) ** 2, 2 * yy.real, -2 * yy.imag],
-        [2 * p11.real, 2 * p22.real, 2 * (p12.real + p21.real), 2 * (p21.imag - p12.imag)],
-        [2 * p11.imag, 2 * p22.imag, 2 * (p12.imag + p21.imag), 2 * (p12.real - p21.real)],
-    ]
-    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
-
-
-def covariance_sum(A: np.ndarray, S_ext: np.ndarray, w_hat: np.ndarray, step: int) -> np.ndarray:
-    """``Σ_(k,k') Re tr(A_ik C_kk' A_jk' C_k'k)`` over the band's bin pairs (A: (q, k, 2, 2)).
-
-    Per lag ``δ = k' - k`` the summand ``tr(C_kk'ᴴ A_ik C_kk' A_(j,k+δ))`` is a smooth function
-    of ``k`` (model quantities only, no data): summed at the centre bin of every ``step``
-    bins, times the bins it stands for (the midpoint rule). With Hermitian ``A`` it is a real
-    bilinear form ``h(A_ik)ᵀ Lᵀ h(A_(j,k+δ))`` (:func:`_congruence`).
-    """
-    q, k = A.shape[:2]
-    starts, counts, bins = midpoint_bins(k, step)
-    lags, C = lag_covariances(S_ext, w_hat, bins)
-    h = _hermitian_numbers(A)  # (q, k, 4)
-    g = np.matmul(_congruence(C), h[:, bins, :, None][:, None])[..., 0]  # (q, n_δ, kc, 4): each L h
-    partner, weight = lag_partners(starts, counts, bins, lags, k)
-    other = h[:, partner] * weight[None, :, :, None]  # (q, n_δ, kc, 4)
-    out = g.reshape(q, -1) @ other.reshape(q, -1).T
-    return 0.5 * (out + out.T)

@@ -20,12 +20,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import optimize, stats
 
-from rozyn_estimator.method.likelihood.config import LikelihoodConfig
-from rozyn_estimator.method.likelihood.model import HalfCarSpectrum
-from rozyn_estimator.method.likelihood.newton import Fits
-from rozyn_estimator.method.likelihood.objective import WhittleObjective
-from rozyn_estimator.method.likelihood.spectra import Spectra
-
 EVIDENCE_NATS = float(stats.chi2.isf(1e-3, 1)) / 2.0  # 5.4 nats: one parameter, p = 0.001
 WRONG_RATIO = 1.25  # beyond this the speed is named alone (no sensor delay within tolerance does it)
 SMALL_RATIO = 1.03  # below this the speed is as good as the data say
@@ -103,21 +97,6 @@ def check_speed(value_at: Callable[[float, np.ndarray], float],
     if line.success and line.fun <= best_value:
         scale, best_value = math.exp(line.x), float(line.fun)
     return SpeedCheck(1.0 / scale, value - best_value)
-
-
-def half_car_speed(model: HalfCarSpectrum, spectra: Spectra, cfg: LikelihoodConfig) -> tuple[
-        Callable[[float, np.ndarray], float], Callable[[float, np.ndarray], tuple[np.ndarray, float] | None]]:
-    """:func:`check_speed`'s two functions for the half car's model."""
-    def objective(c: float) -> WhittleObjective:
-        scaled = model.variant(speed_mps=np.asarray(model.speed_mps) * c)
-        return WhittleObjective(scaled, spectra, cfg.spectra)
-
-    def refit(c: float, theta: np.ndarray) -> tuple[np.ndarray, float] | None:
-        fits = Fits(objective(c), cfg, cfg.tol)
-        fits.run(theta)
-        return None if fits.best is None else (fits.best.x, float(fits.best.fun))
-
-    return (lambda c, theta: objective(c).fun(theta)), refit
 
 
 def _finite(value_at: Callable[[float, np.ndarray], float], c: float, theta: np.ndarray) -> float:

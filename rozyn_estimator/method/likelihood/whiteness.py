@@ -119,13 +119,6 @@ def _small_direction(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([small, small + 2 * r], axis=1), v[:, :, None]
 
 
-def dither_power(S: np.ndarray, floors: np.ndarray, rank: int,
-                 unknown: np.ndarray | None = None) -> np.ndarray:
-    """(K, k, k) the dither's spectral matrix (:func:`dither_factor`; zero where none)."""
-    C = dither_factor(S, floors, rank, unknown)
-    return np.zeros_like(S) if C is None else C @ np.conj(np.swapaxes(C, -1, -2))
-
-
 def _seeded(dft: np.ndarray) -> np.random.Generator:
     """A random stream that is a function of the window's data (a replay repeats it)."""
     digest = hashlib.blake2b(np.ascontiguousarray(dft).tobytes(), digest_size=8).digest()

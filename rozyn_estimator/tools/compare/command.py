@@ -33,7 +33,7 @@ DESCRIPTION = (
     "Prints per method and parameter: mean, bias, spread, rms error, reported std, 95 % coverage, "
     "failures, model-check warnings and time per estimate. --suite runs a named set of cases."
 )
-DEFAULT_METHODS = ("thesis", "rozyn-eq2-21", "rozyn", "likelihood", "likelihood-auto")
+DEFAULT_METHODS = ("thesis", "rozyn-eq2-21", "rozyn", "likelihood")
 _ALL_SUITES = tuple(dict.fromkeys(s for names in SUITES.values() for s in names))
 
 

@@ -1,7 +1,6 @@
 """The full car's sensors and corner values calibrated by the data: each sensor's gain and
 position, the rear sensors' delay and each axle's corner values (:mod:`.corners`), nuisances
-of the augmented posterior with their tolerances as Gaussian priors (:func:`calibrate_vehicle`;
-the half car's :mod:`rozyn_estimator.method.likelihood.uncertainty.augment`).
+of the augmented posterior with their tolerances as Gaussian priors (:func:`calibrate_vehicle`).
 
 Why not the first-order budget alone (:mod:`.refine_budget`): four sensors on one rigid body
 measure its three motions, and their one redundant combination shows what the assumed sensing
@@ -35,14 +34,13 @@ from typing import cast
 import numpy as np
 
 from rozyn_estimator.body_model import AnyVehicle
+from rozyn_estimator.method.budget import Calibration
 from rozyn_estimator.method.full.spectrum import FullCarSpectrum
 from rozyn_estimator.method.full.uncertainty import corners, sensing
 from rozyn_estimator.method.full.uncertainty.corners import CornerCalibrating
 from rozyn_estimator.method.full.uncertainty.moves import axle_of
 from rozyn_estimator.method.full.whittle import FullWhittle, ridged, scoring
-from rozyn_estimator.method.likelihood.newton import aground
-from rozyn_estimator.method.likelihood.uncertainty.augment import backtracked
-from rozyn_estimator.method.likelihood.uncertainty.calibration import Calibration
+from rozyn_estimator.method.likelihood.guards import aground, backtracked
 
 _FAR = 3.0  # a step longer than this many posterior std: beyond the linear range
 # a cold fit's Newton decrement at which it may hand over to the calibration: every combination

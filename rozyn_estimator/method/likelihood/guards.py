@@ -1,0 +1,53 @@
+"""Guards of a fit's optimum shared by the refinement and the calibration: a noise floor run
+aground revived (:func:`aground`), a step backtracked until it does not lose (:func:`backtracked`),
+and where a floor counts as zero (:data:`NOISE_AT_ZERO`)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+NOISE_AT_ZERO = 1e-5  # a noise floor below this share of its channel's band power: noise-free, held
+_HALVINGS = 4  # backtracking of a step when it does not lower ℓ
+
+_REVIVE_SHARES = 10.0 ** np.arange(-8, 0)  # the floors tried for one run aground, share of its power
+
+
+def aground(fun: Callable[[np.ndarray], float], jac: Callable[[np.ndarray], np.ndarray],
+            theta: np.ndarray, value: float, noise: slice, power: np.ndarray) -> np.ndarray | None:
+    """A start for a fit whose noise floor ran aground: θ with that floor at the best of a few
+    levels, where that beats the fit's optimum ``value`` at ``theta`` (else None).
+
+    A floor is its log in θ, and at a floor far below its channel's power the likelihood's
+    gradient in it vanishes: a fit that wandered there (a poor start, on noisy data) cannot
+    come back, and ends in a wrong basin with that channel noise-free (the model check then
+    rightly warns). Such a floor's likelihood still falls as the floor itself grows (the
+    gradient in the floor, not its log, is negative where raising it to 1e-4 of its channel's
+    power would gain a nat): only those are tried, so noise-free data cost one gradient."""
+    floors = np.exp(theta[noise])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope = jac(theta)[noise] / floors  # ∂ℓ/∂n: the chain rule's factor n taken out
+    stuck = np.flatnonzero((floors < 1e-4 * power) & (slope * 1e-4 * power < -1.0))
+    start, best = None, value
+    for i in stuck:
+        for share in _REVIVE_SHARES:
+            trial = theta.copy()
+            trial[noise.start + i] = math.log(share * power[i])
+            f = fun(trial)
+            if np.isfinite(f) and f < best:
+                start, best = trial, f
+    return start
+
+
+def backtracked(
+    posterior: Callable[[np.ndarray], float], point: np.ndarray, step: np.ndarray, value: float
+) -> np.ndarray:
+    """``point + step``, halved until the ``posterior``'s ℓ does not exceed ``value`` (at most a
+    few times); ``point`` when none does."""
+    for _ in range(_HALVINGS):
+        if posterior(point + step) <= value:
+            return point + step
+        step = 0.5 * step
+    return point
