@@ -57,7 +57,7 @@ def test_the_vehicle_file_overrides_the_vehicle_parameters(tmp_path):
     ({"window_s": 5000}, r"window_s: must lie in \[1, 3600\] s"),
     ({"update_period_s": 200.0}, "update_period_s: must be <= window_s"),
     ({"pipeline.freq_band_hz": [1.0]}, "pipeline.freq_band_hz: expected 2 numbers"),
-    ({"pipeline.likelihood.spectra": "both"}, "pipeline.likelihood.spectra: must be one of cross, auto"),
+    ({"pipeline.stiffness_model": "stiff"}, "pipeline.stiffness_model: must be one of eq2-21, eq2-22"),
     ({"speed_topic_type": "gps"}, "speed_topic_type: must be one of twist, odometry"),
     ({"vehicle.wheelbase_m": -2.0}, "vehicle.wheelbase_m: must be > 0 m"),
     ({"front_axle_x_m": 1e300}, r"front_axle_x_m: must lie in \[-100, 100\] m"),
