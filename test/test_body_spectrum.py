@@ -9,7 +9,7 @@ import pytest
 
 from rozyn_estimator.method.body_parameters import BodyParameters
 from rozyn_estimator.method.full.fit import corner_value_count
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.full.uncertainty.moves import values_of
 from rozyn_estimator.sensors import sensors_from_mapping
 from rozyn_estimator.vehicle import Vehicle
@@ -29,7 +29,7 @@ def _vehicle(sensors: dict | None = None) -> Vehicle:
     return v if sensors is None else v.with_sensors(sensors_from_mapping(sensors))
 
 
-def _theta(model: FullCarSpectrum, params: np.ndarray = PARAMS) -> np.ndarray:
+def _theta(model: VehicleSpectrum, params: np.ndarray = PARAMS) -> np.ndarray:
     theta = model.theta(params, 3e-6, np.array([1e-4, 2e-4]))
     theta[model.waviness_index] = 2.3
     theta[model.shape_slice] = [0.2, -0.1]
@@ -41,7 +41,7 @@ def test_the_half_car_is_the_simulators_transfer_function(sensors):
     """G = iω P D⁻¹ Bᵀ T per unit road velocity at each wheel equals the plant's state space
     (the road under each wheel in, the channels out) divided by iω."""
     v = _vehicle(sensors)
-    model = FullCarSpectrum(v, (0, 1), FREQ_HZ, FS_HZ, 20.0, aliases=0)
+    model = VehicleSpectrum(v, (0, 1), FREQ_HZ, FS_HZ, 20.0, aliases=0)
     truth = np.array([v.sprung_mass_kg, v.pitch_inertia_kgm2, v.cog_from_front_axle_m])
     theta = model.theta(truth, 1.0, np.ones(2))
     ss = state_space(v)
@@ -60,7 +60,7 @@ def test_the_half_car_is_the_simulators_transfer_function(sensors):
 @pytest.mark.parametrize(("sensors", "calibrate"), [(None, ("gain", "x", "delay")), (IMU, ("gain", "delay"))],
                          ids=["two accelerometers", "one IMU"])
 def test_every_derivative_of_the_half_car_is_its_slope(speed, sensors, calibrate):
-    model = FullCarSpectrum(_vehicle(sensors), (0, 1), FREQ_HZ, FS_HZ, speed, aliases=1, road_shape_terms=2,
+    model = VehicleSpectrum(_vehicle(sensors), (0, 1), FREQ_HZ, FS_HZ, speed, aliases=1, road_shape_terms=2,
                             calibrate=calibrate)
     theta = _theta(model)
     _, dS = model.spectrum(theta)
@@ -76,7 +76,7 @@ def test_the_corners_derivatives_are_the_half_cars_slopes():
     """Along each corner value (spring, damper, tyre, wheel of each axle) the model's analytic
     derivative is its change with the vehicle moved."""
     v = _vehicle()
-    model = FullCarSpectrum(v, (0, 1), FREQ_HZ, FS_HZ, 27.0, aliases=1, road_shape_terms=2)
+    model = VehicleSpectrum(v, (0, 1), FREQ_HZ, FS_HZ, 27.0, aliases=1, road_shape_terms=2)
     theta = _theta(model)
     base = values_of(v)
     assert corner_value_count(v) == base.size == 10

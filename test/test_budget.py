@@ -13,7 +13,7 @@ import pytest
 
 from rozyn_estimator.method import METHODS, PipelineConfig, estimate
 from rozyn_estimator.method.budget import Budget, rozyn_contributions
-from rozyn_estimator.method.full.refine import refine_full
+from rozyn_estimator.method.full.refine import refine as refine_vehicle
 from rozyn_estimator.method.likelihood import LikelihoodConfig
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.vehicle import Vehicle
@@ -29,7 +29,7 @@ EXACT = Vehicle(tolerances=Tolerances.none())
 def refine(y: np.ndarray, fs_hz: float, vehicle: Vehicle, start: np.ndarray, speed: float,
            config: LikelihoodConfig | None = None):
     """The refinement of the half car's front and rear channels."""
-    return refine_full(y, fs_hz, vehicle, (0, 1), start, speed, config)
+    return refine_vehicle(y, fs_hz, vehicle, (0, 1), start, speed, config)
 
 
 def window(seed: int = 5, departures: Departures | None = None) -> np.ndarray:

@@ -11,7 +11,7 @@ import pytest
 
 from rozyn_estimator.method.budget import Calibration
 from rozyn_estimator.method.full import refine
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.full.stage import FullEstimate, estimate_full
 from rozyn_estimator.method.full.uncertainty import calibrate
 from rozyn_estimator.method.full.uncertainty.calibrate import VehicleCalibration, sensor_groups
@@ -31,8 +31,8 @@ FIRST_ORDER = dataclasses.replace(CALIBRATING, likelihood=dataclasses.replace(CA
 ALL = ("gain", "x", "y", "delay")
 
 
-def _model(**kw: object) -> tuple[FullCarSpectrum, np.ndarray]:
-    model = FullCarSpectrum(CAR, (0, 1, 2, 3), np.linspace(0.5, 20.0, 60), 100.0, 27.0, **kw)  # type: ignore[arg-type]
+def _model(**kw: object) -> tuple[VehicleSpectrum, np.ndarray]:
+    model = VehicleSpectrum(CAR, (0, 1, 2, 3), np.linspace(0.5, 20.0, 60), 100.0, 27.0, **kw)  # type: ignore[arg-type]
     theta = model.theta(TRUTH, 1e-4, np.full(4, 1e-6))
     return model, theta
 

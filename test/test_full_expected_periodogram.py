@@ -12,8 +12,8 @@ from scipy.signal import windows
 
 from rozyn_estimator.method import METHODS
 from rozyn_estimator.method.full.grid import averaging_matrix, expected_periodogram_m2
-from rozyn_estimator.method.full.refine import refine_full
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.refine import refine
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
@@ -63,7 +63,7 @@ def test_the_derivatives_are_those_of_the_averaged_model():
     """dS/dθ of the averaged model against its finite differences (the map is linear)."""
     v = EXACT
     freq = np.linspace(0.5, 20.0, 400)
-    model = FullCarSpectrum(v, (0, 1, 2, 3), freq, 100.0, 100 / 3.6, kernel_m2_hz2=1e-4)
+    model = VehicleSpectrum(v, (0, 1, 2, 3), freq, 100.0, 100 / 3.6, kernel_m2_hz2=1e-4)
     th = model.theta(np.array([v.sprung_mass_kg, v.roll_inertia_kgm2, v.pitch_inertia_kgm2,
                                v.cog_from_front_axle_m, v.cog_lateral_m]), 1e-6, np.full(4, 1e-4))
     S, dS = model.spectrum(th)
@@ -82,7 +82,7 @@ def _roll_error_pct(seed: int, noise: float) -> float:
     y = Simulation(sim).run(120.0).accel_mps2
     y = y + np.random.default_rng([seed, 4]).standard_normal(y.shape) * noise * y.std(axis=0)
     start = estimate_full(y, 100.0, EXACT, METHODS["rozyn"], 100 / 3.6).params
-    ref = refine_full(y, 100.0, EXACT, (0, 1, 2, 3), start, 100 / 3.6, LikelihoodConfig())
+    ref = refine(y, 100.0, EXACT, (0, 1, 2, 3), start, 100 / 3.6, LikelihoodConfig())
     assert ref.ok, ref.reason
     return 100.0 * (ref.params[1] / EXACT.roll_inertia_kgm2 - 1.0)
 

@@ -8,16 +8,16 @@ import dataclasses
 import numpy as np
 import pytest
 
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.full.uncertainty.geometry import GEOMETRY, geometry_derivatives
 from rozyn_estimator.vehicle_full import FullVehicle
 
 BARS = {"anti_roll_stiffness_front_nmprad": 20000.0, "anti_roll_stiffness_rear_nmprad": 8000.0}
 
 
-def _model(sensors: tuple[int, ...], speed: float | np.ndarray, bars: bool) -> FullCarSpectrum:
+def _model(sensors: tuple[int, ...], speed: float | np.ndarray, bars: bool) -> VehicleSpectrum:
     v = dataclasses.replace(FullVehicle(), **(BARS if bars else {}))
-    return FullCarSpectrum(v, sensors, np.linspace(0.5, 15.0, 600), 100.0, speed, grid_hz=0.05,
+    return VehicleSpectrum(v, sensors, np.linspace(0.5, 15.0, 600), 100.0, speed, grid_hz=0.05,
                            kernel_m2_hz2=1e-4, road_max_cpm=5.0)
 
 

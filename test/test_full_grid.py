@@ -21,10 +21,10 @@ from rozyn_estimator.method.full.fit import (
     corner_response_derivatives,
 )
 from rozyn_estimator.method.full.grid import ALIAS_SPACING_HZ, alias_map
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.full.uncertainty import refine_budget
-from rozyn_estimator.method.full.whittle import FullWhittle
+from rozyn_estimator.method.full.whittle import WhittleObjective
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation
@@ -60,10 +60,10 @@ def test_the_grid_leaves_the_estimate_and_its_covariance(seed, speed_kmh):
     np.testing.assert_allclose(np.sqrt(np.diag(quick.refinement.covariance)), std, rtol=5e-3)
 
 
-def _model_and_theta(grid_hz: float) -> tuple[FullCarSpectrum, np.ndarray]:
+def _model_and_theta(grid_hz: float) -> tuple[VehicleSpectrum, np.ndarray]:
     v = FullVehicle()
     freq = np.arange(0.5, 15.0, 1 / 60)
-    model = FullCarSpectrum(v, (0, 1, 2, 3), freq, 100.0, 100 / 3.6, kernel_m2_hz2=5e-5, grid_hz=grid_hz)
+    model = VehicleSpectrum(v, (0, 1, 2, 3), freq, 100.0, 100 / 3.6, kernel_m2_hz2=5e-5, grid_hz=grid_hz)
     theta = model.theta(np.array([v.sprung_mass_kg, v.roll_inertia_kgm2, v.pitch_inertia_kgm2,
                                   v.cog_from_front_axle_m, v.cog_lateral_m]), 1e-6, np.full(4, 1e-6))
     theta[model.index["ln_coherence_scale"]] = 0.1
@@ -86,7 +86,7 @@ def test_the_gradient_through_the_adjoint_is_the_slope_of_the_likelihood():
     rng = np.random.default_rng(4)
     x = rng.standard_normal((S.shape[0], 4, 8)) + 1j * rng.standard_normal((S.shape[0], 4, 8))
     periodogram = S @ (x @ x.conj().swapaxes(1, 2) / 8) @ S / np.trace(S, axis1=1, axis2=2)[:, None, None]
-    objective = FullWhittle(model, periodogram, np.full(S.shape[0], 2.0))
+    objective = WhittleObjective(model, periodogram, np.full(S.shape[0], 2.0))
     grad = objective.jac(theta)
     for i in (0, 1, 3, 4, 5, model.index["ln_coherence_scale"], model.noise_slice.start):
         h = 1e-6
@@ -99,7 +99,7 @@ def test_the_gradient_through_the_adjoint_is_the_slope_of_the_likelihood():
 def test_the_optimisers_hessian_is_the_fisher_information_within_a_few_percent():
     model, theta = _model_and_theta(0.05)
     S, _ = model.spectrum(theta, derivatives=False)
-    objective = FullWhittle(model, S, np.full(S.shape[0], 2.0))
+    objective = WhittleObjective(model, S, np.full(S.shape[0], 2.0))
     fisher, hessian = objective.fisher(theta), objective.hess(theta)
     scale = np.sqrt(np.outer(np.diag(fisher), np.diag(fisher)))
     assert np.max(np.abs(hessian - fisher) / scale) < 0.03

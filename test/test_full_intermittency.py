@@ -53,13 +53,13 @@ def test_bad_samples_say_nothing_rather_than_a_made_up_kappa():
     assert road_intermittency(np.ones((5000, 2)), np.ones(2), 0.2) == 1.0  # all noise: no road part
 
 
-def _run(kind: str, seed: int, duration_s: float = 120.0) -> tuple[np.ndarray, refine.FullRefinement]:
+def _run(kind: str, seed: int, duration_s: float = 120.0) -> tuple[np.ndarray, refine.Refinement]:
     sim = SimConfig(model="full", full_vehicle=EXACT, road=RoadSpec(kind=kind, amplitudes="gaussian"),
                     speed_kmh=100.0, seed=seed)
     y = Simulation(sim).run(duration_s).accel_mps2
     y = y + np.random.default_rng([seed, 4]).standard_normal(y.shape) * 0.1 * y.std(axis=0)
     start = estimate_full(y, 100.0, EXACT, METHODS["rozyn"], 100 / 3.6).params
-    ref = refine.refine_full(y, 100.0, EXACT, (0, 1, 2, 3), start, 100 / 3.6)
+    ref = refine.refine(y, 100.0, EXACT, (0, 1, 2, 3), start, 100 / 3.6)
     assert ref.ok, ref.reason
     return y, ref
 

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.method import PipelineConfig
-from rozyn_estimator.method.full.refine import refine_full
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.refine import refine
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
@@ -45,7 +45,7 @@ def test_the_model_is_the_simulators_transfer_function():
     """G = iω P D⁻¹ Bᵀ T per unit road velocity equals the plant's state space (road height
     in, accelerations out) divided by iω, with every coupling at work."""
     f = np.linspace(0.3, 20.0, 40)
-    model = FullCarSpectrum(RAISED, (0, 1, 2, 3), f, 100.0, 20.0, aliases=0)
+    model = VehicleSpectrum(RAISED, (0, 1, 2, 3), f, 100.0, 20.0, aliases=0)
     ss = state_space(RAISED)
     w = 2 * np.pi * f
     eye = np.eye(ss.a.shape[0])
@@ -58,7 +58,7 @@ def test_the_model_is_the_simulators_transfer_function():
 
 
 def test_the_derivatives_are_the_models_slopes():
-    model = FullCarSpectrum(RAISED, (0, 1, 3), np.linspace(0.5, 15.0, 60), 100.0,
+    model = VehicleSpectrum(RAISED, (0, 1, 3), np.linspace(0.5, 15.0, 60), 100.0,
                             np.linspace(15.0, 25.0, 500), aliases=1)
     theta = model.theta(_truth(RAISED), 1e-4, np.full(3, 1e-3))
     theta[6:10] = [2.2, 0.1, -0.2, 0.3]  # waviness, road shape, coherence scale
@@ -137,7 +137,7 @@ def test_without_a_speed_rozyns_estimate_is_published_with_a_note():
 def test_a_channel_that_is_only_noise_is_refused():
     y = _run(EXACT, seed=5, duration_s=60.0)
     y[:, 2] = np.random.default_rng(1).standard_normal(y.shape[0]) * y[:, 2].std()
-    ref = refine_full(y, 100.0, EXACT, (0, 1, 2, 3), _truth(EXACT), SPEED_MPS)
+    ref = refine(y, 100.0, EXACT, (0, 1, 2, 3), _truth(EXACT), SPEED_MPS)
     assert ref.status == "failed" and "rear_left channel as mostly noise" in ref.reason
 
 
@@ -195,7 +195,7 @@ def test_a_poor_start_calls_for_the_grids_start_and_the_better_optimum_wins():
     y = Simulation(sim).run(120.0).accel_mps2
     y = y + np.random.default_rng([0, 3]).standard_normal(y.shape) * 0.1 * y.std(axis=0)
     poor = np.array([856.0, 135.0, 1144.0, 1.055, 0.017])
-    ref = refine_full(y - y.mean(axis=0), 100.0, EXACT, (0, 1, 2, 3), poor, 50 / 3.6)
+    ref = refine(y - y.mean(axis=0), 100.0, EXACT, (0, 1, 2, 3), poor, 50 / 3.6)
     assert ref.ok and ref.starts >= 2 and not ref.notes, ref.reason
     assert ref.params is not None and ref.covariance is not None
     z = (ref.params - _truth(EXACT)) / np.sqrt(np.diag(ref.covariance))

@@ -36,9 +36,9 @@ def test_a_steady_speed_has_no_stretches_and_a_stop_belongs_to_none():
         assert np.all(shares > 0)
 
 
-def _refined(speed: np.ndarray | float, y: np.ndarray) -> refine.FullRefinement:
+def _refined(speed: np.ndarray | float, y: np.ndarray) -> refine.Refinement:
     start = estimate_full(y, FS, EXACT, METHODS["rozyn"], 20.0).params
-    ref = refine.refine_full(y, FS, EXACT, (0, 1, 2, 3), start, speed)
+    ref = refine.refine(y, FS, EXACT, (0, 1, 2, 3), start, speed)
     assert ref.ok, ref.reason
     return ref
 

@@ -1,5 +1,5 @@
 """The likelihood refinement of the half car (its front and rear channels through the one
-refinement, :func:`~rozyn_estimator.method.full.refine.refine_full`): its fit from poor and
+refinement, :func:`~rozyn_estimator.method.full.refine.refine`): its fit from poor and
 missing starts, a warm start, its failures as statuses, and the pipeline around it."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS, PipelineConfig, estimate
-from rozyn_estimator.method.full.refine import refine_full
+from rozyn_estimator.method.full.refine import refine as refine_vehicle
 from rozyn_estimator.method.likelihood import LikelihoodConfig
 from rozyn_estimator.method.likelihood.road_input import delay_characteristic
 from rozyn_estimator.tolerances import Tolerances
@@ -28,7 +28,7 @@ EXACT = Vehicle(tolerances=Tolerances.none())  # the fit in-model: every assumed
 def refine(accel: np.ndarray, fs_hz: float, vehicle: Vehicle, start: np.ndarray | None, speed,
            config: LikelihoodConfig | None = None, warm=None):
     """The refinement of the half car's front and rear channels."""
-    return refine_full(accel, fs_hz, vehicle, (0, 1), start, speed, config, warm=warm)
+    return refine_vehicle(accel, fs_hz, vehicle, (0, 1), start, speed, config, warm=warm)
 
 
 def run(vehicle=None, seed=3, duration_s=100.0, noise=0.05, rate_hz=100.0, **sim):

@@ -11,7 +11,7 @@ from bag_helpers import write_imu_bag
 from rozyn_estimator.bag import open_bag
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PipelineConfig
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.pipeline import estimate
 from rozyn_estimator.online import EstimatorConfig
 from rozyn_estimator.sensors import sensors_from_mapping
@@ -125,7 +125,7 @@ def test_the_gyro_channel_is_the_pitch_rate_of_two_axle_accelerometers():
     freq = np.linspace(0.3, 20.0, 200)
     axles, imu = Vehicle(), imu_vehicle(exact=False)
     theta_of = lambda m: m.theta(TRUTH, 1e-6, np.array([1e-4, 1e-6]))  # noqa: E731
-    m, n = (FullCarSpectrum(v, (0, 1), freq, 100.0, SPEED_MPS, aliases=0) for v in (axles, imu))
+    m, n = (VehicleSpectrum(v, (0, 1), freq, 100.0, SPEED_MPS, aliases=0) for v in (axles, imu))
     s_axles, _ = m.spectrum(theta_of(m), False)
     s_imu, _ = n.spectrum(theta_of(n), False)
     L, x, w = axles.wheelbase_m, 1.5, 2 * np.pi * freq

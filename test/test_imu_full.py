@@ -13,7 +13,7 @@ from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES
 from rozyn_estimator.method.full.imu import stage_input
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.imu import gyro_sign_problem
 from rozyn_estimator.online import EstimatorConfig
@@ -126,7 +126,7 @@ def test_the_rate_channels_are_the_corners_spectrum_through_the_rigid_body():
     corners, imu = FullVehicle(cog_lateral_m=0.05), imu_car(cog_lateral_m=0.05)
     s = {}
     for name, v, k in (("corners", corners, (0, 1, 2, 3)), ("imu", imu, (0, 1, 2))):
-        model = FullCarSpectrum(v, k, freq, 100.0, SPEED_MPS, aliases=0)
+        model = VehicleSpectrum(v, k, freq, 100.0, SPEED_MPS, aliases=0)
         theta = model.theta(np.array([1000.0, 400.0, 2000.0, 1.2, 0.05]), 1e-6, np.full(len(k), 1e-30))
         s[name], _ = model.spectrum(theta, derivatives=False)
     L, T, w = 2.8, 1.5, 2 * np.pi * freq

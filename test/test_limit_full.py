@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES
-from rozyn_estimator.method.full.refine import refine_full
+from rozyn_estimator.method.full.refine import refine
 from rozyn_estimator.tools.cli import main
 from rozyn_estimator.tools.trial.limit import infinite_data_limit, record_spectra
 from rozyn_estimator.tools.trial.run import simulate
@@ -32,7 +32,7 @@ def test_the_limit_of_the_model_itself_lies_within_its_standard_errors():
     z = limit.departure / limit.standard_error
     assert np.all(np.abs(z) < 3.5), z.tolist()
     # the limit's standard error is one record's std over √n: far below one record's spread
-    single = refine_full(*_one_record(_spec(), 1))
+    single = refine(*_one_record(_spec(), 1))
     assert single.ok and single.covariance is not None
     assert np.allclose(limit.standard_error, np.sqrt(np.diag(single.covariance) / len(_SEEDS)), rtol=0.2)
 
@@ -47,7 +47,7 @@ def test_a_tyre_stiffness_the_estimator_is_told_wrong_shows_as_the_models_bias()
 def test_the_given_spectra_must_be_the_windows():
     spectra, speed, sensors = record_spectra((_spec(), 1))
     short = np.zeros((spectra.n_samples // 2, 4))
-    ref = refine_full(short, spectra.fs_hz, FullVehicle(), sensors, None, speed[: short.shape[0]],
+    ref = refine(short, spectra.fs_hz, FullVehicle(), sensors, None, speed[: short.shape[0]],
                       spectra=spectra)
     assert ref.status == "failed" and "not this window's" in ref.reason
 

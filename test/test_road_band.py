@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.method import METHODS
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.road_input import driving_speed, spatial_band
@@ -41,13 +41,13 @@ def test_half_cars_aliases_hold_the_road_below_its_end(speed_kmh, like):
     """At 30 km/h a profile ending at 5 cycles/m ends at 42 Hz: nothing aliases at 100 Hz;
     at 100 km/h (139 Hz) every alias of the band is below the end."""
     v = speed_kmh / 3.6
-    ended = FullCarSpectrum(Vehicle(), (0, 1), FREQ, 100.0, v, aliases=1, road_max_cpm=5.0)
-    other = FullCarSpectrum(Vehicle(), (0, 1), FREQ, 100.0, v, aliases=0 if like == "no aliases" else 1)
+    ended = VehicleSpectrum(Vehicle(), (0, 1), FREQ, 100.0, v, aliases=1, road_max_cpm=5.0)
+    other = VehicleSpectrum(Vehicle(), (0, 1), FREQ, 100.0, v, aliases=0 if like == "no aliases" else 1)
     noise = np.array([1e-6, 1e-6])
     S1 = ended.spectrum(ended.theta(TRUTH, 1e-3, noise), derivatives=False)[0]
     S0 = other.spectrum(other.theta(TRUTH, 1e-3, noise), derivatives=False)[0]
     assert np.abs(S1 - S0).max() <= 1e-12 * np.abs(S0).max()
-    unlimited = FullCarSpectrum(Vehicle(), (0, 1), FREQ, 100.0, v, aliases=1)
+    unlimited = VehicleSpectrum(Vehicle(), (0, 1), FREQ, 100.0, v, aliases=1)
     Su = unlimited.spectrum(unlimited.theta(TRUTH, 1e-3, noise), derivatives=False)[0]
     assert (np.abs(Su - S1).max() > 1e-9 * np.abs(S0).max()) == (like == "no aliases")
 
@@ -59,7 +59,7 @@ def test_full_cars_aliases_hold_the_road_below_its_end(speed_kmh, like):
     params = np.array([1000.0, 400.0, 2000.0, 1.2, 0.0])
 
     def spectrum(**kw: float) -> np.ndarray:
-        model = FullCarSpectrum(car, (0, 1, 2, 3), FREQ, 100.0, v, **kw)
+        model = VehicleSpectrum(car, (0, 1, 2, 3), FREQ, 100.0, v, **kw)
         return model.spectrum(model.theta(params, 1e-3, np.full(4, 1e-6)), derivatives=False)[0]
 
     S1 = spectrum(aliases=1, road_max_cpm=5.0)

@@ -19,7 +19,7 @@ import numpy as np
 from scipy import signal
 
 from rozyn_estimator.body_model import AnyVehicle
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import FullVehicle
 
@@ -57,7 +57,7 @@ def gyro_sign_problem(y: np.ndarray, fs_hz: float, vehicle: AnyVehicle,
         return None
 
     def model_cross(freq_hz: np.ndarray) -> np.ndarray:
-        model = FullCarSpectrum(vehicle, range(len(kinds)), freq_hz, fs_hz, float(speed_mps), aliases=0)
+        model = VehicleSpectrum(vehicle, range(len(kinds)), freq_hz, fs_hz, float(speed_mps), aliases=0)
         theta = model.theta(_nominal(vehicle), 1.0, np.full(len(kinds), 1e-12))
         S, _ = model.spectrum(theta, derivatives=False)
         return S[:, accels][:, :, gyros]

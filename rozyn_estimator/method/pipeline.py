@@ -31,8 +31,8 @@ from rozyn_estimator.method.config import PARAM_NAMES, PipelineConfig
 from rozyn_estimator.method.correlation import correlation_sums, lag_range
 from rozyn_estimator.method.drive import constant_speed_only, varying_drive, window_speed
 from rozyn_estimator.method.fit import axle_shapes, characteristic_matrix, fit_inertia
-from rozyn_estimator.method.full.refine import refine_full
-from rozyn_estimator.method.full.result import FullRefinement
+from rozyn_estimator.method.full.refine import refine
+from rozyn_estimator.method.full.result import Refinement
 from rozyn_estimator.method.glitches import InputError, checked_window
 from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
 from rozyn_estimator.method.imu import gyro_sign_problem, stage_input, stage_vehicle
@@ -65,7 +65,7 @@ class Estimate:
     notes: tuple[str, ...] = field(default=())
     stage: str = "rozyn"
     rozyn: Estimate | None = None
-    refinement: FullRefinement | None = None
+    refinement: Refinement | None = None
     budget: Budget | None = None  # the covariance's statistical and systematic parts
     glitches: tuple[int, ...] = (0, 0)  # samples gated as glitches (front, rear): method/glitches.py
 
@@ -220,7 +220,7 @@ def _refined(
     y: np.ndarray, fs_hz: float, vehicle: Vehicle, cfg: PipelineConfig, speed_mps: float | None,
     speed: float | np.ndarray | None, warm_start: Estimate | np.ndarray | None, started: float,
 ) -> Estimate:
-    """The likelihood refinement (:func:`~rozyn_estimator.method.full.refine.refine_full`, the
+    """The likelihood refinement (:func:`~rozyn_estimator.method.full.refine.refine`, the
     one for every car) after Rozyn's stage, with its fallbacks.
 
     Rozyn's estimate starts the fit (the previous window's optimum, warm). Its jackknife
@@ -231,9 +231,9 @@ def _refined(
     n = quick.n_samples
     start = quick.params if quick.ok else _warm_params(warm_start)
     if speed is None:
-        ref = FullRefinement(status="failed", reason="the speed is unknown (it sets the wheelbase delay)")
+        ref = Refinement(status="failed", reason="the speed is unknown (it sets the wheelbase delay)")
     else:
-        ref = refine_full(y, fs_hz, vehicle, (0, 1), start, speed, cfg.likelihood, warm=_warm(warm_start))
+        ref = refine(y, fs_hz, vehicle, (0, 1), start, speed, cfg.likelihood, warm=_warm(warm_start))
     jackknife = not ref.ok and cfg.variance != "none"
     rozyn = _rozyn_stage(y, fs_hz, vehicle, cfg, speed_mps, started) if jackknife else quick
     elapsed = (time.perf_counter() - started) * 1e3
@@ -271,7 +271,7 @@ def _warm_params(warm_start: Estimate | np.ndarray | None) -> np.ndarray | None:
     return None if warm_start is None else np.asarray(warm_start, dtype=float)
 
 
-def _warm(warm_start: Estimate | np.ndarray | None) -> FullRefinement | None:
+def _warm(warm_start: Estimate | np.ndarray | None) -> Refinement | None:
     """The previous window's refinement (its θ starts this one's), if usable."""
     if isinstance(warm_start, Estimate) and warm_start.refinement is not None and warm_start.refinement.ok:
         return warm_start.refinement

@@ -24,14 +24,14 @@ import math
 
 import numpy as np
 
-from rozyn_estimator.method.full.whittle import FullWhittle
+from rozyn_estimator.method.full.whittle import WhittleObjective
 from rozyn_estimator.method.likelihood.fitcheck import ALPHA, FITS, NOT_COMPUTABLE, ModelFit, misfit
 from rozyn_estimator.method.likelihood.guards import NOISE_AT_ZERO
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power
 from rozyn_estimator.method.likelihood.whiteness import whiteness
 
 
-def full_model_fit(objective: FullWhittle, theta: np.ndarray, spectra: Spectra, step: int,
+def full_model_fit(objective: WhittleObjective, theta: np.ndarray, spectra: Spectra, step: int,
                    kappa: float) -> ModelFit:
     """The check at the fit's optimum ``theta``: ``spectra`` the window's (its DFT), ``step`` the
     bins in each of the objective's periodogram means, ``kappa`` the taper's neighbour

@@ -46,11 +46,11 @@ from scipy import fft as sfft
 
 from rozyn_estimator.method.full.score import spectrum_itself
 from rozyn_estimator.method.full.stretches import Stretches, drive_stretches, pairs, stretched_factors
-from rozyn_estimator.method.full.whittle import FullWhittle
+from rozyn_estimator.method.full.whittle import WhittleObjective
 from rozyn_estimator.method.likelihood.spectra import Spectra
 
 
-def variance_factors(objective: FullWhittle, theta: np.ndarray, combos: np.ndarray, spectra: Spectra,
+def variance_factors(objective: WhittleObjective, theta: np.ndarray, combos: np.ndarray, spectra: Spectra,
                      noise_share: np.ndarray, taper: float) -> np.ndarray:
     """(q,) the factors on the model's variances of the ``combos`` (q, n_params) directions
     for the window's intermittency (module docstring) and, on a varying drive, its stretches
@@ -67,7 +67,7 @@ def variance_factors(objective: FullWhittle, theta: np.ndarray, combos: np.ndarr
     return intermittency_factors(objective, theta, combos, samples, noise_share, taper, stretches)
 
 
-def intermittency_factors(objective: FullWhittle, theta: np.ndarray, combos: np.ndarray,
+def intermittency_factors(objective: WhittleObjective, theta: np.ndarray, combos: np.ndarray,
                           samples: np.ndarray, noise_share: np.ndarray, taper: float,
                           stretches: Stretches | None = None) -> np.ndarray:
     """(q,) per direction: ``1 + (κ - 1) ρ``, ``κ`` the road's intermittency
@@ -100,7 +100,7 @@ def intermittency_factors(objective: FullWhittle, theta: np.ndarray, combos: np.
     return np.maximum(steady, stretched_factors(objective, theta, A, total, m4, stretches))
 
 
-def road_itself(objective: FullWhittle, theta: np.ndarray) -> np.ndarray:
+def road_itself(objective: WhittleObjective, theta: np.ndarray) -> np.ndarray:
     """(K, k, k) S's road part itself at the fit's frequencies, not the periodogram's
     expectation: without the taper's and the groups' smoothing (``m₂ S''/2``), which puts
     some road power where the road itself has none (module docstring: why that part is no

@@ -10,8 +10,8 @@ from collections.abc import Callable
 import numpy as np
 
 from rozyn_estimator.method.full.grid import expected_periodogram_m2
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
-from rozyn_estimator.method.full.whittle import FullWhittle, scoring
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum
+from rozyn_estimator.method.full.whittle import WhittleObjective, scoring
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.spectra import Spectra, taper_window
 
@@ -32,7 +32,7 @@ def grouped(freq_hz: np.ndarray, periodogram: np.ndarray, step: int) -> tuple[np
             np.add.reduceat(periodogram, starts, axis=0) / counts[:, None, None], counts)
 
 
-def coarse_fit(spectra: Spectra, n: int, model: FullCarSpectrum,
+def coarse_fit(spectra: Spectra, n: int, model: VehicleSpectrum,
                cfg: LikelihoodConfig) -> Callable[[np.ndarray], np.ndarray]:
     """θ → a cold start's fit on coarser means (``_COARSE_HZ``), to ``_COARSE_TOL``: far
     from the optimum a Newton step needs only the likelihood's broad shape, at a fraction of
@@ -42,7 +42,7 @@ def coarse_fit(spectra: Spectra, n: int, model: FullCarSpectrum,
         return lambda theta: theta
     freq, periodogram, counts = grouped(spectra.freq_hz, spectra.periodogram, step)
     coarse = model.regrid(freq, kernel_m2(n, spectra.fs_hz, cfg.taper, counts), 2.0 * model.grid_hz)
-    objective = FullWhittle(coarse, periodogram, counts)
+    objective = WhittleObjective(coarse, periodogram, counts)
     settings = dataclasses.replace(cfg, tol=_COARSE_TOL)
 
     def fit(theta: np.ndarray) -> np.ndarray:

@@ -1,6 +1,6 @@
-"""The likelihood refinement: :func:`refine_full` (a window's maximum-likelihood body parameters,
+"""The likelihood refinement: :func:`refine` (a window's maximum-likelihood body parameters,
 the full car's ``(m, I_xx, I_yy, l_f, y_c)`` or the half car's ``(m, I_yy, l_f)``, and their
-covariance, as a :class:`FullRefinement`).
+covariance, as a :class:`Refinement`).
 
 Started from Rozyn's stage: the negative Whittle log-likelihood (:mod:`.whittle`) of the window's
 periodogram matrices in the band is minimised over θ (:mod:`.spectrum`: the five body
@@ -58,9 +58,9 @@ from rozyn_estimator.body_model import AnyVehicle, corners_of, rolls
 from rozyn_estimator.method.full.fitcheck import full_model_fit
 from rozyn_estimator.method.full.intermittency import variance_factors
 from rozyn_estimator.method.full.means import GROUP_HZ, coarse_fit, grouped, kernel_m2
-from rozyn_estimator.method.full.result import FullRefinement
+from rozyn_estimator.method.full.result import Refinement
 from rozyn_estimator.method.full.score import sandwich_ratio
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.full.speed import check_full_speed, speed_models
 from rozyn_estimator.method.full.uncertainty.calibrate import (
     HANDOFF,
@@ -71,7 +71,7 @@ from rozyn_estimator.method.full.uncertainty.calibrate import (
 )
 from rozyn_estimator.method.full.uncertainty.corners import corner_keys
 from rozyn_estimator.method.full.uncertainty.refine_budget import refinement_contributions
-from rozyn_estimator.method.full.whittle import FullWhittle, ridged, scoring
+from rozyn_estimator.method.full.whittle import WhittleObjective, ridged, scoring
 from rozyn_estimator.method.information import information_lost
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.fitcheck import neighbour_correlation, unsteady_fit
@@ -91,11 +91,11 @@ class _FitError(Exception):
     """The optimum found is not credible (becomes a failed status)."""
 
 
-def refine_full(
+def refine(
     accel_mps2: np.ndarray, fs_hz: float, vehicle: AnyVehicle, sensors: Sequence[int],
     start: np.ndarray | None, speed_mps: float | np.ndarray, config: LikelihoodConfig | None = None,
-    warm: FullRefinement | None = None, spectra: Spectra | None = None,
-) -> FullRefinement:
+    warm: Refinement | None = None, spectra: Spectra | None = None,
+) -> Refinement:
     """Maximum-likelihood body parameters from a window (the full car's five, the half car's three).
 
     Args:
@@ -119,15 +119,15 @@ def refine_full(
         result = _refine(np.asarray(accel_mps2, dtype=float), float(fs_hz), vehicle, tuple(sensors), start,
                          speed_mps, cfg, warm, spectra)
     except _FitError as exc:
-        result = FullRefinement(status="failed", reason=str(exc))
+        result = Refinement(status="failed", reason=str(exc))
     except (np.linalg.LinAlgError, ArithmeticError, ValueError) as exc:
-        result = FullRefinement(status="failed", reason=f"likelihood fit: {type(exc).__name__}: {exc}")
+        result = Refinement(status="failed", reason=f"likelihood fit: {type(exc).__name__}: {exc}")
     return dataclasses.replace(result, elapsed_ms=(time.perf_counter() - started) * 1e3)
 
 
 def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, ...],
             start: np.ndarray | None, speed: float | np.ndarray, cfg: LikelihoodConfig,
-            warm: FullRefinement | None, given: Spectra | None = None) -> FullRefinement:
+            warm: Refinement | None, given: Spectra | None = None) -> Refinement:
     band = cfg.band_at(fs)
     v = np.atleast_1d(np.asarray(speed, dtype=float))
     if not (v.size and np.all(np.isfinite(v)) and np.all(v >= 0) and np.any(v > 0)):  # standing: no road
@@ -148,14 +148,14 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
     assumed = warm.calibration if warm is not None and warm.calibration is not None \
         and warm.calibration.same_plan(groups, corners) else None  # the previous window's values
     assumed_vehicle = vehicle if assumed is None else assumed.vehicle(vehicle)
-    model = FullCarSpectrum(assumed_vehicle, sensors, freq, fs, v if v.size > 1 else float(v[0]),
+    model = VehicleSpectrum(assumed_vehicle, sensors, freq, fs, v if v.size > 1 else float(v[0]),
                             cfg.aliases, f_ref_hz=math.sqrt(band[0] * band[1]),
                             road_shape_terms=cfg.road_shape_terms, min_noise_psd=_MIN_NOISE * power,
                             kernel_m2_hz2=kernel, road_max_cpm=cfg.road_max_cpm,
                             sensor_values=None if assumed is None else assumed.values,
                             grid_hz=0.0 if _noise_free(warm, power) else cfg.grid_hz,
                             sample_weights=taper_window(y.shape[0], cfg.taper) ** 2 if v.size > 1 else None)
-    objective = FullWhittle(model, periodogram, counts)
+    objective = WhittleObjective(model, periodogram, counts)
     best: OptimizeResult | None = None
     iterations = starts = 0
     ahead = coarse_fit(spectra, y.shape[0], model, cfg)
@@ -200,7 +200,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
         # nearly noise-free: S is nearly singular and the interpolation's small errors matter
         found, best = best.x, None
         model = model.regrid(freq, kernel, 0.0)
-        objective = FullWhittle(model, periodogram, counts)
+        objective = WhittleObjective(model, periodogram, counts)
         run(found, max(1, cfg.max_iter - iterations))
     if best is not None and objective.decrement(best.x) >= fit_cfg.tol and iterations < cfg.max_iter:
         run(best.x, cfg.max_iter - iterations)  # the better start's fit, continued
@@ -222,7 +222,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
         else:
             model.assume_sensors(calibration.values)
             model.set_vehicle(calibration.vehicle(vehicle))
-            objective = FullWhittle(model, periodogram, counts)
+            objective = WhittleObjective(model, periodogram, counts)
     notes += [] if calibration is None else calibration.departures()
     share = _noise_share(theta, model, power)
     worst = int(np.argmax(share))
@@ -274,7 +274,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
             (calibration is not None and not calibration.converged):
         notes.append(f"likelihood fit: not converged in {cfg.max_iter} iterations")
     k, lost = model.index, information_lost(*objective.sampled_model(theta), jac, every=4)  # every 12th bin
-    return FullRefinement(
+    return Refinement(
         status="ok", params=params, covariance=0.5 * (cov + cov.T), theta=theta, names=tuple(model.names),
         neg_log_likelihood=float(best.fun), iterations=iterations, starts=starts, band_hz=band,
         noise_std_mps2=tuple(np.sqrt(np.exp(theta[model.noise_slice]) * fs).tolist()),
@@ -285,8 +285,8 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
         information_lost=tuple(tuple(float(x) for x in row) for row in lost))
 
 
-def _contributions(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndarray, vehicle: AnyVehicle,
-                   warm: FullRefinement | None,
+def _contributions(objective: WhittleObjective, theta: np.ndarray, theta_cov: np.ndarray, vehicle: AnyVehicle,
+                   warm: Refinement | None,
                    calibration: VehicleCalibration | None,
                    misfit: bool = False) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
     """The tolerances' contributions and the θ they were taken at: the calibrated sensors'
@@ -322,26 +322,26 @@ def _spectra(y: np.ndarray, fs: float, band: tuple[float, float], taper: float,
     return given
 
 
-def _noise_free(warm: FullRefinement | None, power: np.ndarray) -> bool:
+def _noise_free(warm: Refinement | None, power: np.ndarray) -> bool:
     """The previous window's fit ran a noise floor to zero (S at every frequency from the start)."""
     if warm is None or warm.theta is None or not warm.noise_std_mps2:
         return False
     return bool(np.min(np.exp(warm.theta[-power.size:]) / power) < NOISE_AT_ZERO)
 
 
-def _noise_share(theta: np.ndarray, model: FullCarSpectrum, power: np.ndarray) -> np.ndarray:
+def _noise_share(theta: np.ndarray, model: VehicleSpectrum, power: np.ndarray) -> np.ndarray:
     """Each channel's fitted noise floor, share of its power in the band."""
     return np.exp(theta[model.noise_slice]) / power
 
 
-def _physical(params: np.ndarray, model: FullCarSpectrum) -> bool:
+def _physical(params: np.ndarray, model: VehicleSpectrum) -> bool:
     """The body's parameters, finite, the mass and inertias positive, the CoG between the axles."""
     p, lf = np.asarray(params, dtype=float), model.body.lf_index
     return bool(p.shape == (model.n_body,) and np.all(np.isfinite(p)) and np.all(p[:lf] > 0)
                 and 0 < p[lf] < model.wheelbase_m)
 
 
-def _start_theta(model: FullCarSpectrum, objective: FullWhittle, power: np.ndarray, params: np.ndarray,
+def _start_theta(model: VehicleSpectrum, objective: WhittleObjective, power: np.ndarray, params: np.ndarray,
                  noise_share: float) -> np.ndarray:
     """θ at ``params`` with the road intensity matched to the band's power."""
     theta = model.theta(params, 1.0, noise_share * power)
@@ -352,7 +352,7 @@ def _start_theta(model: FullCarSpectrum, objective: FullWhittle, power: np.ndarr
     return theta
 
 
-def _grid_start(model: FullCarSpectrum, objective: FullWhittle, power: np.ndarray, v: AnyVehicle,
+def _grid_start(model: VehicleSpectrum, objective: WhittleObjective, power: np.ndarray, v: AnyVehicle,
                 noise_share: float) -> np.ndarray:
     """θ at the best point of a coarse grid: heave, pitch and (the full car) roll frequencies on
     the corners' static stiffness (suspension in series with tyre, the bars in roll), the CoG at
@@ -380,8 +380,8 @@ def _grid_start(model: FullCarSpectrum, objective: FullWhittle, power: np.ndarra
     return finite[0][2]
 
 
-def _sandwich(objective: FullWhittle, theta: np.ndarray, combos: np.ndarray, model_cov: np.ndarray,
-              spectra: Spectra, context: tuple[object, ...], warm: FullRefinement | None) -> SandwichRatio:
+def _sandwich(objective: WhittleObjective, theta: np.ndarray, combos: np.ndarray, model_cov: np.ndarray,
+              spectra: Spectra, context: tuple[object, ...], warm: Refinement | None) -> SandwichRatio:
     """The sandwich's ratio to the model's std (:func:`~.score.sandwich_ratio`), or the previous
     window's where it holds (:meth:`SandwichRatio.holds`: as long, θ barely moved, the same
     vehicle and settings)."""
@@ -392,4 +392,4 @@ def _sandwich(objective: FullWhittle, theta: np.ndarray, combos: np.ndarray, mod
                          spectra.n_samples, objective.model.n_body, context)
 
 
-__all__ = ["FullRefinement", "refine_full", "ridged"]
+__all__ = ["Refinement", "refine", "ridged"]

@@ -1,4 +1,4 @@
-"""The full car's likelihood refinement's result (:func:`~rozyn_estimator.method.full.refine.refine_full`)."""
+"""The full car's likelihood refinement's result (:func:`~rozyn_estimator.method.full.refine.refine`)."""
 
 from __future__ import annotations
 
@@ -13,11 +13,12 @@ from rozyn_estimator.method.refinement import LikelihoodResult
 
 
 @dataclass(frozen=True)
-class FullRefinement(LikelihoodResult):
-    """Result of the full car's likelihood refinement: ``params`` (5,) in FULL_PARAM_NAMES order,
-    ``contributions`` per 1 u of each assumed value (5,)."""
+class Refinement(LikelihoodResult):
+    """Result of the likelihood refinement, either car: ``params`` the body's parameters (the full
+    car's five in FULL_PARAM_NAMES order, the half car's three in PARAM_NAMES order),
+    ``contributions`` per 1 u of each assumed value (as many)."""
 
-    coherence_scale: float = 1.0  # the tracks' fitted separation over the front track
+    coherence_scale: float = 1.0  # the tracks' fitted separation over the front track (NaN: one track)
     budget_theta: np.ndarray | None = None  # the body parameters θ[:5] the contributions were taken at
     calibration: VehicleCalibration | None = None  # the sensors and corners as the data calibrated them
     sandwich: SandwichRatio | None = None  # the taper's sandwich over the model's std, where taken
@@ -38,4 +39,4 @@ class FullRefinement(LikelihoodResult):
                 "elapsed_ms": self.elapsed_ms, "notes": list(self.notes)}
 
 
-__all__ = ["FullRefinement"]
+__all__ = ["Refinement"]

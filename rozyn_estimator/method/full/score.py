@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from rozyn_estimator.method.full.grid import apply, lagrange_matrix
-from rozyn_estimator.method.full.whittle import FullWhittle
+from rozyn_estimator.method.full.whittle import WhittleObjective
 from rozyn_estimator.method.likelihood.score import lag_covariances, lag_partners, midpoint_bins
 from rozyn_estimator.method.likelihood.spectra import Spectra
 
@@ -31,7 +31,7 @@ _STEP_HZ = 0.2  # the midpoint rule's spacing (measured against 0.1 Hz: the std 
 # at 120 s and 4 % at 30 s; 0.1 Hz would double the work)
 
 
-def fine_spectrum(objective: FullWhittle, theta: np.ndarray, spectra: Spectra, reach: int) -> np.ndarray:
+def fine_spectrum(objective: WhittleObjective, theta: np.ndarray, spectra: Spectra, reach: int) -> np.ndarray:
     """S (K + 2 reach, k, k) itself (not the periodogram's expectation) at the window's bins
     in the band and ``reach`` bins beyond each of its edges: interpolated from the model's
     nodes as the fit's S is (:mod:`.grid`; the few bins beyond the nodes, a tenth of a hertz
@@ -41,7 +41,7 @@ def fine_spectrum(objective: FullWhittle, theta: np.ndarray, spectra: Spectra, r
     return spectrum_itself(objective, theta, freq)
 
 
-def spectrum_itself(objective: FullWhittle, theta: np.ndarray, freq_hz: np.ndarray) -> np.ndarray:
+def spectrum_itself(objective: WhittleObjective, theta: np.ndarray, freq_hz: np.ndarray) -> np.ndarray:
     """S (F, k, k) itself, not the periodogram's expectation (no taper's or groups' smoothing),
     at ``freq_hz``: interpolated from the model's nodes as the fit's S is, or evaluated there
     when the model has no grid (nearly noise-free data)."""
@@ -55,7 +55,7 @@ def spectrum_itself(objective: FullWhittle, theta: np.ndarray, freq_hz: np.ndarr
                  objective.node_spectrum(theta))
 
 
-def score_covariance(objective: FullWhittle, theta: np.ndarray, combos: np.ndarray,
+def score_covariance(objective: WhittleObjective, theta: np.ndarray, combos: np.ndarray,
                      spectra: Spectra) -> np.ndarray:
     """(q, q) ``combos Cov(∇ℓ) combosᵀ`` at θ (module docstring); ``combos`` (q, n_params).
     In single precision (a covariance needs no more; twice as fast). (Each pair of bins is
@@ -79,7 +79,7 @@ def score_covariance(objective: FullWhittle, theta: np.ndarray, combos: np.ndarr
     return 0.5 * (out + out.T)
 
 
-def sandwich_ratio(objective: FullWhittle, theta: np.ndarray, combos: np.ndarray, model_cov: np.ndarray,
+def sandwich_ratio(objective: WhittleObjective, theta: np.ndarray, combos: np.ndarray, model_cov: np.ndarray,
                    spectra: Spectra) -> np.ndarray:
     """(q, q) the sandwich ``combos Cov(∇ℓ) combosᵀ`` (``combos = jac F⁻¹``) over the model's
     std, ``Σ_ij / √(V_ii V_jj)`` with ``V = jac F⁻¹ jacᵀ`` = ``model_cov`` (its diagonal: each

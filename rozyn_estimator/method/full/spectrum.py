@@ -1,4 +1,4 @@
-"""The vehicle's spectral model: :class:`FullCarSpectrum` (the k×k spectral matrix of the body's
+"""The vehicle's spectral model: :class:`VehicleSpectrum` (the k×k spectral matrix of the body's
 channels driven by the road, its parameters θ and dS/dθ), for the full car and the half car (its
 two corners on the centreline, one track, no roll: ``q = (z₀, φ)``). Each corner is its
 suspension (with the anti-roll bars: :func:`~rozyn_estimator.method.full.fit.corner_matrices`)
@@ -51,7 +51,7 @@ from rozyn_estimator.method.likelihood.road_input import (
 from rozyn_estimator.vehicle_full import FullVehicle
 
 
-class FullCarSpectrum:
+class VehicleSpectrum:
     """The vehicle's spectral matrix and its derivatives on the band's Fourier frequencies.
 
     Args:
@@ -144,13 +144,13 @@ class FullCarSpectrum:
         return dict(self._settings)
 
     def regrid(self, freq_hz: np.ndarray, kernel_m2_hz2: np.ndarray | float,
-               grid_hz: float) -> FullCarSpectrum:
+               grid_hz: float) -> VehicleSpectrum:
         """The same model (the same θ) at other frequencies (``grid_hz`` 0: S at each)."""
         m2 = np.broadcast_to(np.asarray(kernel_m2_hz2, dtype=float), freq_hz.shape)
         changes = {"vehicle": self.vehicle, "kernel_m2_hz2": m2, "grid_hz": grid_hz}
-        return FullCarSpectrum(freq_hz=freq_hz, **(self._settings | changes))
+        return VehicleSpectrum(freq_hz=freq_hz, **(self._settings | changes))
 
-    def calibrating(self, groups: Sequence[str]) -> FullCarSpectrum:
+    def calibrating(self, groups: Sequence[str]) -> VehicleSpectrum:
         """This model with θ also holding the sensors' ``groups`` (their departures from the
         vehicle's; the assumed ones dropped), as the constructor's ``calibrate``: a copy that
         shares the rest (the body's motion cached among it), not a new model (a few ms)."""

@@ -7,27 +7,27 @@ from collections.abc import Callable
 
 import numpy as np
 
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
-from rozyn_estimator.method.full.whittle import FullWhittle, scoring
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum
+from rozyn_estimator.method.full.whittle import WhittleObjective, scoring
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.speedcheck import SpeedCheck, check_speed
 
 
-def speed_models(model: FullCarSpectrum) -> Callable[[float], FullCarSpectrum]:
+def speed_models(model: VehicleSpectrum) -> Callable[[float], VehicleSpectrum]:
     """``model`` as it is now (its vehicle and assumed sensors: a snapshot, later calibrations
     do not reach it) with its speed scaled by a factor."""
     settings = model.settings | {"vehicle": model.vehicle}
     speed = np.asarray(model.speed_mps, dtype=float)
-    return lambda c: FullCarSpectrum(freq_hz=model.freq_hz, **(settings | {"speed_mps": speed * c}))
+    return lambda c: VehicleSpectrum(freq_hz=model.freq_hz, **(settings | {"speed_mps": speed * c}))
 
 
-def check_full_speed(models: Callable[[float], FullCarSpectrum], periodogram: np.ndarray, counts: np.ndarray,
+def check_full_speed(models: Callable[[float], VehicleSpectrum], periodogram: np.ndarray, counts: np.ndarray,
                      cfg: LikelihoodConfig, theta: np.ndarray, value: float, window_s: float) -> SpeedCheck:
     """The speed's check at the uncalibrated fit's optimum ``theta`` (negative log likelihood
     ``value``) of the grouped ``periodogram`` (``counts`` bins in each mean) of a ``window_s``
     window."""
-    def objective(c: float) -> FullWhittle:
-        return FullWhittle(models(c), periodogram, counts)
+    def objective(c: float) -> WhittleObjective:
+        return WhittleObjective(models(c), periodogram, counts)
 
     def refit(c: float, at: np.ndarray) -> tuple[np.ndarray, float] | None:
         res = scoring(objective(c), at, cfg.tol, cfg.max_iter)

@@ -35,7 +35,7 @@ from rozyn_estimator.method.correlation import correlation_sums, lag_range
 from rozyn_estimator.method.drive import constant_speed_only, varying_drive, window_speed
 from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES, fit_full_inertia
 from rozyn_estimator.method.full.imu import stage_input
-from rozyn_estimator.method.full.refine import FullRefinement, refine_full
+from rozyn_estimator.method.full.refine import Refinement, refine
 from rozyn_estimator.method.full.uncertainty.budget import FullBudget, full_contributions
 from rozyn_estimator.method.glitches import InputError, checked_window
 from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
@@ -64,7 +64,7 @@ class FullEstimate:
     budget: FullBudget | None = None  # the covariance's statistical and systematic parts
     stage: str = "rozyn"  # whose estimate this is: "rozyn" or "likelihood"
     rozyn: FullEstimate | None = None  # with a refinement: Rozyn's own estimate (its start)
-    refinement: FullRefinement | None = None  # the likelihood refinement, when one ran
+    refinement: Refinement | None = None  # the likelihood refinement, when one ran
     glitches: tuple[int, ...] | None = None  # samples gated as glitches per channel (None: not checked)
 
     @property
@@ -194,12 +194,12 @@ def _refined(
 
 def _refine_window(y: np.ndarray, gated: tuple[int, ...], fs_hz: float, vehicle: FullVehicle,
                    cfg: PipelineConfig, speed_mps: float | np.ndarray | None, sensors: Sequence[str],
-                   index: tuple[int, ...], warm: FullRefinement | None, started: float) -> FullEstimate:
+                   index: tuple[int, ...], warm: Refinement | None, started: float) -> FullEstimate:
     """:func:`_refined`'s stages on the checked window ``y``."""
     rozyn_cfg = dataclasses.replace(cfg, refine="none")
     quick_cfg = dataclasses.replace(rozyn_cfg, variance="none")
     quick = _rozyn_stage(y, fs_hz, vehicle, quick_cfg, speed_mps, sensors, index, time.perf_counter())
-    ref = refine_full(y, fs_hz, vehicle, index, quick.params, 0.0 if speed_mps is None else speed_mps,
+    ref = refine(y, fs_hz, vehicle, index, quick.params, 0.0 if speed_mps is None else speed_mps,
                       cfg.likelihood, warm=warm)
     if ref.ok and ref.params is not None and ref.covariance is not None:
         cal = ref.calibration

@@ -30,8 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from rozyn_estimator.method.full.grid import apply, lagrange_matrix
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum, herm
-from rozyn_estimator.method.full.whittle import FullWhittle
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum, herm
+from rozyn_estimator.method.full.whittle import WhittleObjective
 from rozyn_estimator.method.likelihood.road_input import delay_bins, is_varying
 from rozyn_estimator.method.likelihood.spectra import taper_window
 
@@ -76,10 +76,10 @@ def drive_stretches(wheelbase_m: float, speed_mps: np.ndarray, fs_hz: float, tap
     return Stretches(parts, parts @ time, parts @ fourth, parts @ on_flat)
 
 
-def road_parts(objective: FullWhittle, theta: np.ndarray, parts: np.ndarray) -> np.ndarray:
+def road_parts(objective: WhittleObjective, theta: np.ndarray, parts: np.ndarray) -> np.ndarray:
     """(G, K, k, k) S's road part itself (no taper's smoothing) at the fit's frequencies from
     each group of the mixture's delay bins alone, weighted as in the whole (the groups sum to it)."""
-    model: FullCarSpectrum = objective.model
+    model: VehicleSpectrum = objective.model
     assert model.mixture is not None
     _, H, _, _, _ = model.body_motion(theta)
     reads = model.sensing_at(theta) @ H
@@ -104,7 +104,7 @@ def pairs(A: np.ndarray, left: np.ndarray, right: np.ndarray, counts: np.ndarray
     return np.einsum("qkab,qkba,k->q", A @ left[None], A @ right[None], counts).real
 
 
-def stretched_factors(objective: FullWhittle, theta: np.ndarray, A: np.ndarray, total: np.ndarray,
+def stretched_factors(objective: WhittleObjective, theta: np.ndarray, A: np.ndarray, total: np.ndarray,
                       kurtosis: np.ndarray, stretches: Stretches) -> np.ndarray:
     """(q,) the factors on the model's variances of the directions whose kernels are ``A``
     (``total`` their model variance ``Σ tr(A S A S)``), from the stretches' own spectra and the

@@ -1,4 +1,4 @@
-"""The Whittle objective (:class:`FullWhittle`, either car): ℓ(θ), its gradient and the Fisher
+"""The Whittle objective (:class:`WhittleObjective`, either car): ℓ(θ), its gradient and the Fisher
 information for stacks of k×k spectral matrices:
 
 ``ℓ(θ) = Σ_k log det S_k + tr(S_k⁻¹ I_k)`` over the band's Fourier
@@ -15,18 +15,18 @@ import math
 import numpy as np
 from scipy.optimize import OptimizeResult, minimize
 
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum, herm
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum, herm
 
 _HESSIAN_STEP = 3  # the optimiser's Fisher information: every 3rd frequency (class docstring)
 _HESSIAN_MIN = 300  # ... of models with at least this many frequencies
 
 
-class FullWhittle:
+class WhittleObjective:
     """ℓ(θ), ∇ℓ and the Fisher information of a window's periodogram matrices (cached at the
     last θ).
 
     The model is evaluated at its nodes and mapped to the periodograms' frequencies
-    (:meth:`FullCarSpectrum.to_targets`); the gradient maps back the other way (the map's
+    (:meth:`VehicleSpectrum.to_targets`); the gradient maps back the other way (the map's
     adjoint: one matrix per frequency instead of one per parameter), and the optimiser's
     Hessian is the Fisher information summed over every ``_HESSIAN_STEP``-th frequency, each
     standing for its neighbours (it is smooth in frequency: it shapes the steps, the gradient
@@ -43,7 +43,7 @@ class FullWhittle:
             ℓ, ∇ℓ and the optimiser's Hessian are the posterior's; :meth:`fisher` stays the data's.
     """
 
-    def __init__(self, model: FullCarSpectrum, periodogram: np.ndarray,
+    def __init__(self, model: VehicleSpectrum, periodogram: np.ndarray,
                  counts: np.ndarray | None = None, precision: np.ndarray | None = None) -> None:
         self.model, self.periodogram = model, periodogram
         self.precision = np.zeros(model.n_params) if precision is None else np.asarray(precision, dtype=float)
@@ -250,7 +250,7 @@ class FullWhittle:
         return float(grad @ np.linalg.solve(self.hess(theta), grad))
 
 
-def scoring(objective: FullWhittle, theta0: np.ndarray, tol: float, max_iter: int) -> OptimizeResult:
+def scoring(objective: WhittleObjective, theta0: np.ndarray, tol: float, max_iter: int) -> OptimizeResult:
     """Scoring by scipy's trust-region method (the Fisher information as the Hessian) until the
     Newton decrement is below ``tol``; ``fun`` inf when θ0 gives no finite ℓ."""
     def stop_when_converged(intermediate_result: OptimizeResult) -> None:

@@ -1,6 +1,6 @@
 """``rozyn trial --model full --limit``: the full car's estimate in the limit of infinite data.
 
-One fit (:func:`~rozyn_estimator.method.full.refine.refine_full`) to the periodogram matrices
+One fit (:func:`~rozyn_estimator.method.full.refine.refine`) to the periodogram matrices
 averaged over every seed's record of one condition. Averaging removes the records' sampling
 scatter but not what the model gets wrong, so the limit's departure from the truth is the
 model's own bias (a simulator and an estimator that disagree, a departure the vehicle file does
@@ -26,7 +26,7 @@ import numpy as np
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES
-from rozyn_estimator.method.full.refine import FullRefinement, refine_full
+from rozyn_estimator.method.full.refine import Refinement, refine
 from rozyn_estimator.method.likelihood.spectra import Spectra, window_spectra
 from rozyn_estimator.tools.cars import FULL
 from rozyn_estimator.tools.trial.run import parallel_map, parse_seeds, simulate
@@ -40,7 +40,7 @@ _Z_MODEL = 3.0  # a departure beyond this many standard errors: the model's own 
 class Limit:
     """The fit to the averaged periodogram of ``n`` records."""
 
-    refinement: FullRefinement
+    refinement: Refinement
     truth: np.ndarray  # (5,) the simulated vehicle's (m, I_xx, I_yy, l_f, y_c)
     n: int  # the records averaged
 
@@ -96,7 +96,7 @@ def infinite_data_limit(spec: TrialSpec, seeds: Sequence[int], jobs: int | None 
     vehicle = spec.estimator_vehicle
     assert isinstance(vehicle, FullVehicle)
     told = dataclasses.replace(vehicle, tolerances=cast(FullTolerances, FullTolerances.none()))
-    ref = refine_full(window, last.fs_hz, told, sensors, spec.truth, speed,
+    ref = refine(window, last.fs_hz, told, sensors, spec.truth, speed,
                       spec.pipeline_config().likelihood, spectra=mean)
     return Limit(ref, spec.truth, len(seeds))
 

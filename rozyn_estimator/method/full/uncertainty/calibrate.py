@@ -35,11 +35,11 @@ import numpy as np
 
 from rozyn_estimator.body_model import AnyVehicle
 from rozyn_estimator.method.budget import Calibration
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.full.uncertainty import corners, sensing
 from rozyn_estimator.method.full.uncertainty.corners import CornerCalibrating
 from rozyn_estimator.method.full.uncertainty.moves import axle_of
-from rozyn_estimator.method.full.whittle import FullWhittle, ridged, scoring
+from rozyn_estimator.method.full.whittle import WhittleObjective, ridged, scoring
 from rozyn_estimator.method.likelihood.guards import aground, backtracked
 
 _FAR = 3.0  # a step longer than this many posterior std: beyond the linear range
@@ -127,12 +127,12 @@ class Posterior:
     """The augmented posterior (the fit's θ, then the calibrated values) and its mode: what the
     model check counts as fitted (the calibrated values absorb misfit too)."""
 
-    objective: FullWhittle
+    objective: WhittleObjective
     point: np.ndarray
 
 
 def calibrate_vehicle(
-    objective: FullWhittle, theta: np.ndarray, vehicle: AnyVehicle, groups: tuple[str, ...],
+    objective: WhittleObjective, theta: np.ndarray, vehicle: AnyVehicle, groups: tuple[str, ...],
     start: VehicleCalibration | None = None, max_iter: int = 100, corner_keys: tuple[str, ...] = (),
     power: np.ndarray | None = None,
 ) -> tuple[np.ndarray, VehicleCalibration, Posterior]:
@@ -148,7 +148,7 @@ def calibrate_vehicle(
     labels = tuple(vehicle.channel_names[c] for c in base.sensors)
     gyros = [vehicle.channel_kinds[c] != "accel_z" for c in base.sensors]
     precision = np.r_[np.zeros(n), 1.0 / stds**2]
-    posterior = FullWhittle(model, objective.periodogram, objective.counts, precision)  # type: ignore[arg-type]
+    posterior = WhittleObjective(model, objective.periodogram, objective.counts, precision)  # type: ignore[arg-type]
     every = np.zeros(len(sensing.parameter_names(sensing.GROUPS, k))) if start is None else start.values
     shares = np.zeros(len(corner_keys)) if start is None else start.corner_shares
     point = np.r_[theta, _pick(every, groups, k), shares]
@@ -202,7 +202,7 @@ def calibrate_vehicle(
     return point[:n], calibration, Posterior(posterior, point)
 
 
-def _shares_valid(model: FullCarSpectrum | CornerCalibrating, point: np.ndarray) -> bool:
+def _shares_valid(model: VehicleSpectrum | CornerCalibrating, point: np.ndarray) -> bool:
     """The corner shares of ``point`` make a vehicle (each value above its lowest share)."""
     try:
         cast(CornerCalibrating, model).vehicle_at(point)
@@ -212,7 +212,7 @@ def _shares_valid(model: FullCarSpectrum | CornerCalibrating, point: np.ndarray)
 
 
 def _contributions(
-    info: np.ndarray, model: FullCarSpectrum | CornerCalibrating, point: np.ndarray, precision: np.ndarray,
+    info: np.ndarray, model: VehicleSpectrum | CornerCalibrating, point: np.ndarray, precision: np.ndarray,
     vehicle: AnyVehicle, sensors: tuple[int, ...], labels: tuple[str, ...],
 ) -> tuple[dict[str, np.ndarray], np.ndarray, dict[str, np.ndarray]]:
     """(each calibrated value's contribution (n_body,) to the estimate, the values' posterior std, the

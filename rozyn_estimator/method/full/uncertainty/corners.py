@@ -4,7 +4,7 @@ value (as the tolerances state them and both budgets move them:
 :func:`~rozyn_estimator.method.full.uncertainty.budget.vehicle_moves`, an axle's share on both its
 corners).
 
-:class:`CornerCalibrating` adds those shares to a :class:`~.spectrum.FullCarSpectrum`'s θ
+:class:`CornerCalibrating` adds those shares to a :class:`~.spectrum.VehicleSpectrum`'s θ
 (after its own, the sensors' calibrated values among them) for the augmented posterior of
 :mod:`.calibrate`: S at the vehicle the shares move, and its derivatives by them from the
 model's analytic corner derivatives (one batched pass). The values are linear in the shares,
@@ -18,7 +18,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from rozyn_estimator.body_model import AnyVehicle
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.full.uncertainty.moves import values_of, vehicle_moves
 
 PREFIXES = ("suspension_stiffness", "suspension_damping", "tyre_stiffness", "tyre_damping", "unsprung_mass",
@@ -65,7 +65,7 @@ def moved(vehicle: AnyVehicle, keys: Sequence[str], shares: np.ndarray) -> AnyVe
 
 
 class CornerCalibrating:
-    """A :class:`FullCarSpectrum` (``model``, which may calibrate sensors) whose θ also holds
+    """A :class:`VehicleSpectrum` (``model``, which may calibrate sensors) whose θ also holds
     the shares of ``keys`` (last): as the model's own θ to the Whittle objective.
 
     Args:
@@ -74,7 +74,7 @@ class CornerCalibrating:
         keys: the calibrated corner values' tolerance keys (:func:`corner_keys`).
     """
 
-    def __init__(self, model: FullCarSpectrum, vehicle: AnyVehicle, keys: Sequence[str]) -> None:
+    def __init__(self, model: VehicleSpectrum, vehicle: AnyVehicle, keys: Sequence[str]) -> None:
         self.model, self.file_vehicle, self.keys = model, vehicle, tuple(keys)
         self.directions = directions(vehicle, self.keys)
         self.n_model = model.n_params

@@ -8,7 +8,7 @@ Where the geometry enters the model (:mod:`..spectrum`):
   at ``y = ±t/2``): ``D = Bᵀ Z B - ω² M`` and the road's input ``Bᵀ T`` move, so
   ``dH = D⁻¹ (dBᵀ (T - Z B H) - Bᵀ Z dB H)`` and ``d(P H R Hᴴ Pᴴ) = P dH R Hᴴ Pᴴ + h.c.``;
 - an anti-roll bar's stiffness at the corners, ``K/t²`` (a change of the bar's value ``K`` by
-  ``-2K/t`` per metre of track: :meth:`~.spectrum.FullCarSpectrum.corner_derivatives`);
+  ``-2K/t`` per metre of track: :meth:`~.spectrum.VehicleSpectrum.corner_derivatives`);
 - the rear wheels' delay behind the front ones (the wheelbase:
   :func:`~rozyn_estimator.method.likelihood.road_input.delay_slope` in ``R``);
 - the tracks' coherence, whose argument is proportional to the front track
@@ -25,7 +25,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum, herm
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum, herm
 from rozyn_estimator.method.likelihood.road_input import delay_slope, track_coherence
 from rozyn_estimator.vehicle_full import FullVehicle
 
@@ -34,7 +34,7 @@ _BAR = {"track_front_m": (20, "anti_roll_stiffness_front_nmprad"),
         "track_rear_m": (21, "anti_roll_stiffness_rear_nmprad")}  # the bar's column among the corner values
 
 
-def geometry_derivatives(model: FullCarSpectrum, theta: np.ndarray, keys: Sequence[str]) -> np.ndarray:
+def geometry_derivatives(model: VehicleSpectrum, theta: np.ndarray, keys: Sequence[str]) -> np.ndarray:
     """dS (G, nodes, k, k) at θ per metre of each of ``keys`` (of :data:`GEOMETRY`); on a varying
     drive (the road's mixture over the window's delays and speeds) by central differences."""
     v = model.vehicle
@@ -79,7 +79,7 @@ def geometry_derivatives(model: FullCarSpectrum, theta: np.ndarray, keys: Sequen
     return out
 
 
-def _difference(model: FullCarSpectrum, theta: np.ndarray, key: str, step: float = 1e-5) -> np.ndarray:
+def _difference(model: VehicleSpectrum, theta: np.ndarray, key: str, step: float = 1e-5) -> np.ndarray:
     """dS/d(key) at θ by a central difference of the model (a varying drive's mixture moves with
     the wheelbase's delays and the track's coherence at each of its speeds)."""
     ends = []

@@ -6,7 +6,7 @@ fitted parameters and ``β`` (the expected score's slope in ``β``: the fit abso
 of the changed spectrum into θ, the nuisances included). ``∂_β S``: for the corners' values
 (springs, dampers, tyres, unsprung masses, bars) and the sensors' positions, gains and
 timing the model's analytic derivatives (:class:`~rozyn_estimator.method.full.spectrum.
-FullCarSpectrum`'s ``corner_derivatives`` and ``sensing_derivatives``, and for the wheelbase
+VehicleSpectrum`'s ``corner_derivatives`` and ``sensing_derivatives``, and for the wheelbase
 and tracks :func:`~.geometry.geometry_derivatives`, each in one pass); for any other value the
 model's change with the value moved a small step.
 Per toleranced value: that move times its tolerance,
@@ -16,7 +16,7 @@ a sensor's position or gain to each sensor on its own (independent errors: one
 contribution each), the time offset to the rear sensors against the front ones.
 
 Work: ``F_θβ`` is summed as the optimiser's Hessian is, over every 3rd frequency, each
-counting for its neighbours (:meth:`~.whittle.FullWhittle.sampled_rows`: it is smooth in
+counting for its neighbours (:meth:`~.whittle.WhittleObjective.sampled_rows`: it is smooth in
 frequency; measured within 1.3 % of the whole sum, the budget's total within 0.6 %), all
 moves whitened in one pass; a stepped move is one evaluation of S without derivatives on
 the model's evaluation grid (:mod:`..grid`). Measured: the budget of a cold update from 76 ms
@@ -32,7 +32,7 @@ from collections.abc import Callable
 import numpy as np
 
 from rozyn_estimator.body_model import AnyVehicle
-from rozyn_estimator.method.full.spectrum import FullCarSpectrum
+from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.full.uncertainty.geometry import GEOMETRY, geometry_derivatives
 from rozyn_estimator.method.full.uncertainty.moves import (
     ABS_STEP,
@@ -44,14 +44,14 @@ from rozyn_estimator.method.full.uncertainty.moves import (
     values_of,
     vehicle_moves,
 )
-from rozyn_estimator.method.full.whittle import FullWhittle
+from rozyn_estimator.method.full.whittle import WhittleObjective
 from rozyn_estimator.vehicle_full import FullVehicle
 
 # a move: the step -> (the vehicle moved, a factor per channel (F, k) or None)
 Move = Callable[[float], tuple[AnyVehicle, np.ndarray | None]]
 
 
-def refinement_contributions(objective: FullWhittle, theta: np.ndarray, theta_cov: np.ndarray,
+def refinement_contributions(objective: WhittleObjective, theta: np.ndarray, theta_cov: np.ndarray,
                              vehicle: AnyVehicle, skip: set[str] | None = None) -> dict[str, np.ndarray]:
     """Contributions ``c_j`` (5,) of each toleranced value of ``vehicle`` to the refined estimate
     (but those of the tolerance keys in ``skip``: the calibrated sensors')."""
@@ -98,7 +98,7 @@ def _corner_direction(base: AnyVehicle, moved: AnyVehicle, factor: np.ndarray | 
     return (values_of(moved) - values_of(base)) / step
 
 
-def _sensor_change(model: FullCarSpectrum, base: AnyVehicle, moved: AnyVehicle, factor: np.ndarray | None,
+def _sensor_change(model: VehicleSpectrum, base: AnyVehicle, moved: AnyVehicle, factor: np.ndarray | None,
                    step: float) -> np.ndarray | None:
     """(F, k, b) the move's change of the sensing per unit step, or None when it moves
     anything but the sensors' positions (and their channels' factors)."""
@@ -113,7 +113,7 @@ def _moves_only(base: AnyVehicle, moved: AnyVehicle, names: tuple[str, ...]) -> 
                if f.name not in names)
 
 
-def _moves(v: AnyVehicle, model: FullCarSpectrum, key: str) -> list[tuple[str, float, Move]]:
+def _moves(v: AnyVehicle, model: VehicleSpectrum, key: str) -> list[tuple[str, float, Move]]:
     """(contribution name, step, the move) of one tolerance key: the vehicle's values as in
     Rozyn's stage's budget; each sensor's offset and gain on its own, the rear sensors' timing
     as a factor on their channels."""

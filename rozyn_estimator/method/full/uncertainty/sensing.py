@@ -6,7 +6,7 @@ rate, its pitch gyro of the roll rate).
 Values are departures from the vehicle file's (a log gain, metres, seconds, radians), in one
 flat layout per group (:data:`GROUPS`): ``k`` log gains, ``k`` x and ``k`` y departures, one
 delay, ``k`` turns (an accelerometer's held at 0).
-A model's sensing ``iω f P`` (:meth:`~.spectrum.FullCarSpectrum.sensing_of`: ``f`` a channel's
+A model's sensing ``iω f P`` (:meth:`~.spectrum.VehicleSpectrum.sensing_of`: ``f`` a channel's
 factor, ``P``'s rows ``(1, -x, y)``) becomes
 
     g_i e^{-iωτ r_i} (iω f_i) (1, -(x_i + dx_i), y_i + dy_i),
