@@ -104,9 +104,15 @@ def road_itself(objective: WhittleObjective, theta: np.ndarray) -> np.ndarray:
     """(K, k, k) S's road part itself at the fit's frequencies, not the periodogram's
     expectation: without the taper's and the groups' smoothing (``m₂ S''/2``), which puts
     some road power where the road itself has none (module docstring: why that part is no
-    envelope's). The noise floors are white: S less its diagonal floors."""
+    envelope's). The noise floors are white: S less its diagonal floors.
+
+    The half car's one track is the exception: the power the smoothing moves into the
+    direction its rank-one road lacks is that track's own at the neighbouring frequencies, and
+    varies with the envelope as the road does. Its road part is the expectation's (Laplace
+    road, 100 km/h, 100 s, 40 roads each: the mass' error over its std had an rms of 1.32 on a
+    second vehicle with the road itself, 1.13 with this; 1.02 and 0.91 on Table 5-1's)."""
     model = objective.model
-    S = spectrum_itself(objective, theta, model.freq_hz)
+    S = spectrum_itself(objective, theta, model.freq_hz) if model.rolls else objective.factored(theta)[0]
     return S - np.eye(model.k) * (np.exp(theta[model.noise_slice]) + model.min_noise_psd)
 
 
