@@ -49,27 +49,30 @@ class BodyParameters:
 
     def theta(self, params: np.ndarray) -> np.ndarray:
         """θ's body block from the physical parameters (the full car's order: m, I_xx, I_yy,
-        l_f, y_c; the half car's: m, I_yy, l_f)."""
-        p = params[-2 if self.rolls else -1] / self.wheelbase_m
-        logs = [math.log(x) for x in params[: self.size - (2 if self.rolls else 1)]]
-        return np.array([*logs, math.log(p / (1 - p)), *([params[-1]] if self.rolls else [])])
+        l_f, y_c; the half car's: m, I_yy, l_f): the mass and inertias by their logs, l_f by its
+        share's logit, y_c as it is."""
+        out = np.array(params, dtype=float)
+        j = self.lf_index
+        out[:j] = np.log(out[:j])
+        out[j] = special.logit(out[j] / self.wheelbase_m)
+        return out
 
     def physical(self, theta: np.ndarray) -> np.ndarray:
         """The physical parameters [kg, kg m², m] from θ's body block."""
-        n = self.size
+        out = np.array(theta[: self.size], dtype=float)
+        j = self.lf_index
         with np.errstate(over="ignore"):
-            logs = np.exp(theta[: n - (2 if self.rolls else 1)])
-        lf = special.expit(theta[n - (2 if self.rolls else 1)]) * self.wheelbase_m
-        return np.array([*logs, lf, *([theta[4]] if self.rolls else [])])
+            out[:j] = np.exp(out[:j])
+        out[j] = special.expit(out[j]) * self.wheelbase_m
+        return out
 
     def jacobian(self, theta: np.ndarray) -> np.ndarray:
         """(size, size) d(physical)/dθ: diagonal."""
         values = self.physical(theta)
         p = values[self.lf_index] / self.wheelbase_m
-        diag = values.copy()
+        diag = np.ones(self.size)
+        diag[: self.lf_index] = values[: self.lf_index]
         diag[self.lf_index] = self.wheelbase_m * p * (1 - p)
-        if self.rolls:
-            diag[4] = 1.0
         return np.diag(diag)
 
     @property
