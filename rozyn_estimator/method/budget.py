@@ -73,7 +73,6 @@ GROUPS = {
     "sensor_time_offset": "sensor timing", "cog_height": "heights", "wheel_centre_height": "heights",
     "drive_model": "varying drive's model",
 }
-UNITS = ("kg", "kg m2", "m")
 _REL_STEP = 1e-5
 _ABS_STEP = 1e-6
 

@@ -1,7 +1,6 @@
 """Periodograms of a window: :class:`Spectra` (the front/rear periodogram matrices at the
 Fourier frequencies of a band, with the taper's spectral window and the DFT) from
-:func:`window_spectra`, each channel's power in the band (:func:`band_power`), and the
-window lengths whose FFTs are fast (:func:`fast_length`)."""
+:func:`window_spectra`, and each channel's power in the band (:func:`band_power`)."""
 
 from __future__ import annotations
 
@@ -81,17 +80,6 @@ def _taper(n: int, taper: float) -> tuple[np.ndarray, np.ndarray]:
 def taper_window(n: int, taper: float) -> np.ndarray:
     """The taper :func:`window_spectra` applies to an ``n``-sample window (mean square 1)."""
     return _taper(n, float(taper))[0]
-
-
-def fast_length(n: int) -> int:
-    """The longest length of at most ``n`` samples whose FFTs are fast: 11-smooth (the radices
-    pocketfft has passes for). The refinement keeps a window's newest ``fast_length(n)``
-    samples: at most 2 % fewer (30-120 s at 100 Hz: 0.4 % on average, at most 1.8 %), and its
-    FFTs (the periodograms, the time blocks' score series) run 5-25x faster than at a length
-    with a large prime factor — an online window's length while it grows (30 s at 100 Hz is
-    3 001 samples, a prime), or on sensors whose stamps jitter (measured: a warm update of
-    12 001 or 11 999 samples took 4-10 ms longer than one of 12 000)."""
-    return int(sfft.prev_fast_len(n, real=False)) if n > 1 else n
 
 
 def band_power(spectra: Spectra) -> np.ndarray:
