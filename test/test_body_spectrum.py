@@ -6,6 +6,7 @@ accelerometers and for one IMU, and with the sensors' and the corners' calibrati
 
 import numpy as np
 import pytest
+from spectrum_helpers import assert_slopes, model_response, plant_response
 
 from rozyn_estimator.method.body_parameters import BodyParameters
 from rozyn_estimator.method.full.fit import corner_value_count
@@ -13,7 +14,6 @@ from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.full.uncertainty.moves import values_of
 from rozyn_estimator.sensors import sensors_from_mapping
 from rozyn_estimator.vehicle import Vehicle
-from sim_node.vehicle_plant import state_space
 
 FS_HZ = 100.0
 FREQ_HZ = np.linspace(0.5, 20.0, 120)
@@ -44,16 +44,10 @@ def test_the_half_car_is_the_simulators_transfer_function(sensors):
     model = VehicleSpectrum(v, (0, 1), FREQ_HZ, FS_HZ, 20.0, aliases=0)
     truth = np.array([v.sprung_mass_kg, v.pitch_inertia_kgm2, v.cog_from_front_axle_m])
     theta = model.theta(truth, 1.0, np.ones(2))
-    ss = state_space(v)
-    w = 2 * np.pi * FREQ_HZ
-    eye = np.eye(ss.a.shape[0])
-    plant = np.array([ss.c @ np.linalg.solve(1j * wi * eye - ss.a, ss.b) + ss.d for wi in w])
-    M, _ = model.body.mass_matrix(theta)
-    D = model.body_stiffness + model.body.gravity_stiffness(theta) - (w**2)[:, None, None] * M
-    G = model.sensing @ np.linalg.solve(D, model.body_input)
+    plant = plant_response(v, FREQ_HZ)
     assert model.names[:3] == ["ln_mass", "ln_pitch_inertia", "logit_cog"]
     assert "ln_coherence_scale" not in model.names  # one track
-    assert np.max(np.abs(G * (1j * w)[:, None, None] - plant)) < 1e-9 * np.max(np.abs(plant))
+    assert np.max(np.abs(model_response(model, theta) - plant)) < 1e-9 * np.max(np.abs(plant))
 
 
 @pytest.mark.parametrize("speed", [27.0, VARYING_MPS], ids=["constant", "varying"])
@@ -62,14 +56,7 @@ def test_the_half_car_is_the_simulators_transfer_function(sensors):
 def test_every_derivative_of_the_half_car_is_its_slope(speed, sensors, calibrate):
     model = VehicleSpectrum(_vehicle(sensors), (0, 1), FREQ_HZ, FS_HZ, speed, aliases=1, road_shape_terms=2,
                             calibrate=calibrate)
-    theta = _theta(model)
-    _, dS = model.spectrum(theta)
-    assert dS is not None
-    for j, name in enumerate(model.names):
-        step = np.zeros_like(theta)
-        step[j] = 1e-6
-        slope = (model.spectrum(theta + step, False)[0] - model.spectrum(theta - step, False)[0]) / 2e-6
-        assert np.max(np.abs(slope - dS[j])) < 1e-5 * np.max(np.abs(dS[j])) + 1e-30, name
+    assert_slopes(model, _theta(model), rtol=1e-5, atol=1e-30)
 
 
 def test_the_corners_derivatives_are_the_half_cars_slopes():
