@@ -3,10 +3,13 @@ driving with the estimate held at stops."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from rozyn_estimator.method import METHODS, estimate
+from rozyn_estimator.method import METHODS, PipelineConfig, estimate
+from rozyn_estimator.method.full.refine import _singular
 from rozyn_estimator.method.likelihood.road_input import (
     DRIVING_MPS,
     road_mixture,
@@ -111,6 +114,39 @@ def test_one_imu_in_town_is_covered():
     z = np.array(z)
     assert np.all(np.abs(z) < 3.5), z
     assert np.all(np.abs(z.mean(axis=0)) < 1.5), z.mean(axis=0)
+
+
+def test_an_urban_windows_floor_run_to_zero_is_revived_by_the_next_window():
+    """MEMS noise is 1 % of an urban window's power, and a floor runs to zero within its std
+    on some windows (udds from 400 s, seed 3). The next window, 5 s on, asks for noise there:
+    its warm fit from the previous window with that floor far below its power raises it first
+    and ends in a few iterations where the fit from the previous window as it was ends (from
+    the floor at 1e-10 it took 12 iterations)."""
+    sim = Simulation(SimConfig(drive_cycle_file="udds", road=GAUSSIAN, seed=3, noise_std_mps2=0.025))
+    sim.run(400.0)
+    block, later = sim.run(120.0), sim.run(5.0)
+    cfg = PipelineConfig()
+    first = estimate(block.accel_mps2, 100.0, Vehicle(), cfg, block.speed_mps)
+    aground = first.refinement.theta.copy()
+    aground[-2:] = aground[-2:].max(), aground[-2:].min() - 10.0  # the front's floor far below its power
+    warm = dataclasses.replace(first, refinement=dataclasses.replace(first.refinement, theta=aground))
+    y = np.vstack([block.accel_mps2[500:], later.accel_mps2])
+    v = np.concatenate([block.speed_mps[500:], later.speed_mps])
+    usual = estimate(y, 100.0, Vehicle(), cfg, v, warm_start=first).refinement
+    held = estimate(y, 100.0, Vehicle(), cfg, v, warm_start=warm).refinement
+    assert usual.status == held.status == "ok", (usual.reason, held.reason)
+    assert held.iterations <= 6, held.iterations
+    assert held.neg_log_likelihood <= usual.neg_log_likelihood + 0.01
+    std = np.sqrt(np.diag(usual.covariance))
+    assert np.all(np.abs(held.params - usual.params) < 0.05 * std), (held.params - usual.params) / std
+
+
+def test_one_floor_at_zero_keeps_the_grid_while_the_road_leaves_s_regular():
+    """S is singular only when more channels are noise-free than the road has inputs."""
+    half = np.array([1e-9, 0.02])
+    assert not _singular(half, two_tracks=False) and _singular(np.array([1e-9, 1e-8]), False)
+    assert not _singular(np.array([1e-9, 1e-9, 0.02, 0.03]), True)
+    assert _singular(np.array([1e-9, 1e-9, 1e-9, 0.03]), True)
 
 
 @pytest.mark.parametrize("cycle", ["udds", "hwfet"])

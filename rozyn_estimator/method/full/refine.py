@@ -153,7 +153,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
                             road_shape_terms=cfg.road_shape_terms, min_noise_psd=_MIN_NOISE * power,
                             kernel_m2_hz2=kernel, road_max_cpm=cfg.road_max_cpm,
                             sensor_values=None if assumed is None else assumed.values,
-                            grid_hz=0.0 if _noise_free(warm, power) else cfg.grid_hz,
+                            grid_hz=0.0 if _noise_free(warm, power, rolls(vehicle)) else cfg.grid_hz,
                             sample_weights=taper_window(y.shape[0], cfg.taper) ** 2 if v.size > 1 else None)
     objective = WhittleObjective(model, periodogram, counts)
     best: OptimizeResult | None = None
@@ -186,7 +186,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
     first_params = np.full(model.n_body, np.nan)
     if warm is not None and warm.theta is not None and warm.theta.size == model.n_params:
         first_params = model.physical(warm.theta)
-        run(warm.theta, first_iter)
+        run(_revived(objective, model, warm.theta, power), first_iter)
     elif start is not None and _physical(start, model):
         first_params = np.asarray(start, dtype=float)
         run(_start_theta(model, objective, power, first_params, cfg.noise_start), first_iter, cold=True)
@@ -196,8 +196,8 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
         revived = aground(objective.fun, objective.jac, best.x, best.fun, model.noise_slice, power)
         if revived is not None:
             run(revived, max(1, cfg.max_iter - iterations))
-    if best is not None and model.grid_hz > 0 and _noise_share(best.x, model, power).min() < NOISE_AT_ZERO:
-        # nearly noise-free: S is nearly singular and the interpolation's small errors matter
+    if best is not None and model.grid_hz > 0 and _singular(_noise_share(best.x, model, power), model.rolls):
+        # nearly singular S: the interpolation's small errors matter
         found, best = best.x, None
         model = model.regrid(freq, kernel, 0.0)
         objective = WhittleObjective(model, periodogram, counts)
@@ -322,11 +322,33 @@ def _spectra(y: np.ndarray, fs: float, band: tuple[float, float], taper: float,
     return given
 
 
-def _noise_free(warm: Refinement | None, power: np.ndarray) -> bool:
-    """The previous window's fit ran a noise floor to zero (S at every frequency from the start)."""
+def _noise_free(warm: Refinement | None, power: np.ndarray, two_tracks: bool) -> bool:
+    """The previous window's fit ran so many noise floors to zero that S is nearly singular
+    (:func:`_singular`): S at every frequency from the start."""
     if warm is None or warm.theta is None or not warm.noise_std_mps2:
         return False
-    return bool(np.min(np.exp(warm.theta[-power.size:]) / power) < NOISE_AT_ZERO)
+    return _singular(np.exp(warm.theta[-power.size:]) / power, two_tracks)
+
+
+def _singular(shares: np.ndarray, two_tracks: bool) -> bool:
+    """More channels noise-free (``shares``: each floor's share of its channel's power) than
+    the road has inputs (one track, or two): S is then singular but for the interpolation's
+    errors. One floor at zero among the half car's two leaves S as well conditioned as its
+    other floor (an urban window's MEMS noise is 2 % of its power, and its floor often runs
+    to zero within its std): the grid stands there."""
+    return int(np.count_nonzero(shares < NOISE_AT_ZERO)) > (2 if two_tracks else 1)
+
+
+def _revived(objective: WhittleObjective, model: VehicleSpectrum, theta: np.ndarray,
+             power: np.ndarray) -> np.ndarray:
+    """The previous window's θ with a floor it ran aground raised where this window's data
+    ask for noise there (:func:`aground`): the floors are a small share of an urban window's
+    power and swing within their std, and a fit from a floor at 1e-10 walks its log back one
+    trust radius at a time (12 iterations, measured)."""
+    value = objective.fun(theta)
+    revived = aground(objective.fun, objective.jac, theta, value, model.noise_slice, power) \
+        if np.isfinite(value) else None
+    return theta if revived is None else revived
 
 
 def _noise_share(theta: np.ndarray, model: VehicleSpectrum, power: np.ndarray) -> np.ndarray:
