@@ -13,20 +13,22 @@ from rozyn_estimator.method.full import intermittency, refine, stretches
 from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.full.stretches import drive_stretches
 from rozyn_estimator.method.likelihood.road_input import DRIVING_MPS
+from rozyn_estimator.method.likelihood.spectra import taper_window
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation
 
 EXACT = dataclasses.replace(FullVehicle(), tolerances=FullTolerances.none())
 FS = 100.0
+TAPERED = taper_window(12_000, 0.1) ** 2  # a 120 s window's sample weights, tapered
 
 
 def test_a_steady_speed_has_no_stretches_and_a_stop_belongs_to_none():
-    assert drive_stretches(2.8, np.full(12_000, 20.0), FS, 0.1) is None
+    assert drive_stretches(2.8, np.full(12_000, 20.0), FS, TAPERED) is None
     t = np.arange(12_000) / FS
     speed = np.where(t < 50, 10.0, 25.0)
     speed[(t > 55) & (t < 75)] = 0.0  # a stop between the two speeds
-    parts = drive_stretches(2.8, speed, FS, 0.1)
+    parts = drive_stretches(2.8, speed, FS, TAPERED)
     assert parts is not None and parts.parts.shape[0] >= 2
     assert not np.any(parts.parts.sum(axis=0) > 1)  # each delay bin in one stretch
     stopped = (speed < DRIVING_MPS).mean()
@@ -52,7 +54,7 @@ def test_stretches_alike_give_the_steady_drives_factors():
     y = sim.run(120.0).accel_mps2
     y = y + np.random.default_rng(5).standard_normal(y.shape) * 0.1 * y.std(axis=0)
     ripple = 20.0 * (1.0 + 1e-6 * np.sin(np.arange(y.shape[0]) / 50.0))
-    assert drive_stretches(EXACT.wheelbase_m, ripple, FS, 0.1) is not None
+    assert drive_stretches(EXACT.wheelbase_m, ripple, FS, TAPERED) is not None
     steady, stretched = _refined(20.0, y), _refined(ripple, y)
     np.testing.assert_allclose(stretched.variance_factors, steady.variance_factors, rtol=0.03)
 
@@ -61,8 +63,9 @@ def test_a_drive_at_two_speeds_raises_the_roll_more_than_the_heave(tmp_path, mon
     """Half the window at 8 m/s, half at 25 m/s (a stop between, masked): the tracks' difference,
     whose power grows at the low speed (their coherence falls with f/v), raises the roll
     inertia's and the lateral CoG's variance well above the mass's, which two stretches of
-    different shape need not raise at all (the score's kernels are indefinite). The published
-    factors are the larger of these and the samples' kurtosis's."""
+    different shape need not raise at all (the score's kernels are indefinite): 1.28 and 1.52
+    against 1.00 with the stretches ramped in and out over 3 s (above 1.3 and 1.5 cut square).
+    The published factors are the larger of these and the samples' kurtosis's."""
     seen = []
 
     def spy(*args, **kwargs):
@@ -80,5 +83,5 @@ def test_a_drive_at_two_speeds_raises_the_roll_more_than_the_heave(tmp_path, mon
     published = np.array(_refined(block.speed_mps, y).variance_factors)
     stretched = seen[-1]
     assert np.all(stretched >= 1.0), stretched
-    assert stretched[1] > 1.3 * stretched[0] and stretched[4] > 1.3 * stretched[0], stretched
+    assert stretched[1] > 1.2 * stretched[0] and stretched[4] > 1.2 * stretched[0], stretched
     assert np.all(published >= stretched - 1e-12) and np.any(published > stretched), (published, stretched)

@@ -61,9 +61,10 @@ def variance_factors(objective: WhittleObjective, theta: np.ndarray, combos: np.
     samples = _band_samples(spectra, spectra.dft[None])[0]
     model = objective.model
     stretches = None
-    if model.mixture is not None and np.size(model.speed_mps) == spectra.n_samples:
+    if model.mixture is not None and model.sample_weights is not None and \
+            np.size(model.speed_mps) == spectra.n_samples:
         stretches = drive_stretches(model.vehicle.wheelbase_m, np.asarray(model.speed_mps), spectra.fs_hz,
-                                    taper)
+                                    model.sample_weights)
     return intermittency_factors(objective, theta, combos, samples, noise_share, taper, stretches)
 
 

@@ -76,7 +76,7 @@ from rozyn_estimator.method.information import information_lost
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.fitcheck import neighbour_correlation, unsteady_fit
 from rozyn_estimator.method.likelihood.guards import NOISE_AT_ZERO, aground
-from rozyn_estimator.method.likelihood.road_input import steady_window, unsteady
+from rozyn_estimator.method.likelihood.road_input import steady_gates, steady_window, unsteady
 from rozyn_estimator.method.likelihood.score import SandwichRatio
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, taper_window, window_spectra
 
@@ -134,7 +134,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
         raise _FitError("likelihood fit needs a positive speed")
     if v.size not in (1, y.shape[0]):
         raise _FitError(f"speed: expected 1 or {y.shape[0]} values, got {v.size}")
-    spectra = _spectra(steady_window(y, vehicle.wheelbase_m, v, fs), fs, band, cfg.taper, given)
+    spectra = _spectra(steady_window(y, vehicle.wheelbase_m, v, fs, cfg.ramp_s), fs, band, cfg.taper, given)
     if spectra.freq_hz.size < 50:
         raise _FitError(f"too few frequencies in {band[0]:g}-{band[1]:g} Hz")
     power = band_power(spectra)
@@ -154,7 +154,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
                             kernel_m2_hz2=kernel, road_max_cpm=cfg.road_max_cpm,
                             sensor_values=None if assumed is None else assumed.values,
                             grid_hz=0.0 if _noise_free(warm, power, rolls(vehicle)) else cfg.grid_hz,
-                            sample_weights=taper_window(y.shape[0], cfg.taper) ** 2 if v.size > 1 else None)
+                            sample_weights=_sample_weights(y.shape[0], vehicle.wheelbase_m, v, fs, cfg))
     objective = WhittleObjective(model, periodogram, counts)
     best: OptimizeResult | None = None
     iterations = starts = 0
@@ -320,6 +320,16 @@ def _spectra(y: np.ndarray, fs: float, band: tuple[float, float], taper: float,
                         f"{given.fs_hz:g} Hz; the window: {y.shape[0]} at {fs:g} Hz, band "
                         f"{band[0]:g}-{band[1]:g} Hz)")
     return given
+
+
+def _sample_weights(n: int, wheelbase_m: float, speed_mps: np.ndarray, fs_hz: float,
+                    cfg: LikelihoodConfig) -> np.ndarray | None:
+    """(n,) each sample's weight in a varying drive's road power: the square of the taper
+    times the steady stretches' gates (:func:`steady_gates`, as the data are cut); None for
+    one speed."""
+    if speed_mps.size == 1:
+        return None
+    return (taper_window(n, cfg.taper) * steady_gates(wheelbase_m, speed_mps, fs_hz, cfg.ramp_s)) ** 2
 
 
 def _noise_free(warm: Refinement | None, power: np.ndarray, two_tracks: bool) -> bool:

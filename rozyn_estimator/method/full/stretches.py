@@ -1,16 +1,16 @@
 """A varying drive's stretches: how much more the full car's estimate varies when the window's
 road comes at several speeds (:func:`stretched_factors`).
 
-The likelihood of a varying drive models the window's spectrum as the mixture of its
-stretches' local spectra, ``S = Σ_g π_g Ŝ_g`` (``π_g`` each stretch's share of the tapered
-window, :mod:`~rozyn_estimator.method.likelihood.road_input`). That is the periodogram's
-expectation, but not its covariance: neighbouring DFT ordinates are correlated by the
-window's changing power, and the score of a direction with kernels ``A = S⁻¹ (c·∂S) S⁻¹``
-varies as ``Σ_g ω_g Σ_k tr(A Ŝ_g A Ŝ_g)`` (``ω_g`` the stretch's share of the taper's fourth
-power; a locally stationary process), not as ``Σ_k tr(A S A S)``. How much more depends on
-the direction: the roll inertia and the lateral CoG draw their information from the tracks'
-difference, whose power grows at low speed (the tracks' coherence falls with the spatial
-frequency ``f / v``), the mass from the heave, whose power falls with the speed. The
+The likelihood of a varying drive models the window's spectrum as the mixture of its stretches'
+local spectra, ``S = Σ_g π_g Ŝ_g`` (``π_g`` each stretch's share of the window's square, the
+taper times the stretches' gates, :mod:`~rozyn_estimator.method.likelihood.road_input`). That
+is the periodogram's expectation, but not its covariance: neighbouring DFT ordinates are
+correlated by the window's changing power, and the score of a direction with kernels ``A = S⁻¹
+(c·∂S) S⁻¹`` varies as ``Σ_g ω_g Σ_k tr(A Ŝ_g A Ŝ_g)`` (``ω_g`` the stretch's share of the
+window's fourth power; a locally stationary process), not as ``Σ_k tr(A S A S)``. How much more
+depends on the direction: the roll inertia and the lateral CoG draw their information from the
+tracks' difference, whose power grows at low speed (the tracks' coherence falls with the
+spatial frequency ``f / v``), the mass from the heave, whose power falls with the speed. The
 samples the model masks (standing, pulling away: their data are zeroed) carry nothing, so a
 window masked in part counts the rest for more. Measured on urban windows (the full car, 12
 roads, exact vehicle) with one road intermittency factor for every parameter (the samples'
@@ -20,7 +20,7 @@ publishes the larger of that factor and these.
 
 The road's own intermittency (:mod:`.intermittency`) multiplies each stretch's road part:
 the samples' kurtosis is compared with what the stretches' powers alone give
-(``E[x⁴]/3 = κ E_u[P²] + 2 E_u[P N] + E_u[N²]``, ``u`` the flat taper's shares).
+(``E[x⁴]/3 = κ E_u[P²] + 2 E_u[P N] + E_u[N²]``, ``u`` the shares of the window's flat part).
 """
 
 from __future__ import annotations
@@ -33,7 +33,6 @@ from rozyn_estimator.method.full.grid import apply, lagrange_matrix
 from rozyn_estimator.method.full.spectrum import VehicleSpectrum, herm
 from rozyn_estimator.method.full.whittle import WhittleObjective
 from rozyn_estimator.method.likelihood.road_input import delay_bins, is_varying
-from rozyn_estimator.method.likelihood.spectra import taper_window
 
 GROUPS = 5  # the drive's delay bins in this many stretches of equal time (a group costs ~5 ms)
 
@@ -43,24 +42,23 @@ class Stretches:
     """A varying drive's samples in groups of nearly the same speed (masked samples in none)."""
 
     parts: np.ndarray  # (G, bins) bool: each group's delay bins (the mixture's)
-    time: np.ndarray  # (G,) its share of the taper's square over the window, π
-    fourth: np.ndarray  # (G,) its share of the taper's fourth power, ω
-    flat: np.ndarray  # (G,) its share of the samples where the taper is flat (the kurtosis'), u
+    time: np.ndarray  # (G,) its share of the window's square (taper and gates), π
+    fourth: np.ndarray  # (G,) its share of the window's fourth power, ω
+    flat: np.ndarray  # (G,) its share of the samples where the window is flat (the kurtosis'), u
 
 
-def drive_stretches(wheelbase_m: float, speed_mps: np.ndarray, fs_hz: float, taper: float,
+def drive_stretches(wheelbase_m: float, speed_mps: np.ndarray, fs_hz: float, sample_weights: np.ndarray,
                     groups: int = GROUPS) -> Stretches | None:
-    """The window's stretches (None: one speed while driving, or no driving)."""
+    """The window's stretches (None: one speed while driving, or no driving); ``sample_weights``
+    (n,) the square of each sample's window (the taper's, times the steady stretches' gates:
+    the model's)."""
     if not is_varying(speed_mps):
         return None
     tau, bins = delay_bins(wheelbase_m, speed_mps, fs_hz)
     if tau.size < 2:
         return None
-    n = bins.size
-    w2 = taper_window(n, taper) ** 2
-    edge = int(np.ceil(0.5 * taper * n)) + 1
-    flat = np.zeros(n)
-    flat[edge: n - edge] = 1.0
+    w2 = np.asarray(sample_weights, dtype=float)
+    flat = (w2 >= 1.0 - 1e-9).astype(float)  # neither tapered nor ramped
     driven = bins >= 0
 
     def shares(weight: np.ndarray) -> np.ndarray:

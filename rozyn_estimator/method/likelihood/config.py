@@ -20,6 +20,9 @@ class LikelihoodConfig:
                                     low=0.0, open_low=True, high=1.0)
     taper: float = param(0.2, "share of the window under a cosine taper",
                          low=0.0, high=1.0)
+    ramp_s: float = param(3.0, "a varying drive's steady stretches rise and fall over a raised cosine of "
+                          "this length (a square cut spreads the body modes' power across the band)",
+                          unit="s", low=0.0)
     aliases: int = param(1, "aliasing terms of the sampled spectrum modelled on each side", low=0, high=5)
     road_max_cpm: float = param(5.0, "the road's profile ends here (a tyre smooths shorter waves away): the "
                                 "aliases hold the road below it only (0: no end)", unit="cycles/m", low=0.0)
