@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES
+from rozyn_estimator.method.config import FULL_PARAM_NAMES
 from rozyn_estimator.method.full.stage import FullEstimate
 from rozyn_estimator.tools.cars import FULL
 from rozyn_estimator.tools.cli import main

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.method import METHODS, PipelineConfig, estimate
-from rozyn_estimator.method.full.refine import _singular
+from rozyn_estimator.method.likelihood.guards import singular_floors
 from rozyn_estimator.method.likelihood.road_input import (
     DRIVING_MPS,
     road_mixture,
@@ -144,9 +144,9 @@ def test_an_urban_windows_floor_run_to_zero_is_revived_by_the_next_window():
 def test_one_floor_at_zero_keeps_the_grid_while_the_road_leaves_s_regular():
     """S is singular only when more channels are noise-free than the road has inputs."""
     half = np.array([1e-9, 0.02])
-    assert not _singular(half, two_tracks=False) and _singular(np.array([1e-9, 1e-8]), False)
-    assert not _singular(np.array([1e-9, 1e-9, 0.02, 0.03]), True)
-    assert _singular(np.array([1e-9, 1e-9, 1e-9, 0.03]), True)
+    assert not singular_floors(half, two_tracks=False) and singular_floors(np.array([1e-9, 1e-8]), False)
+    assert not singular_floors(np.array([1e-9, 1e-9, 0.02, 0.03]), True)
+    assert singular_floors(np.array([1e-9, 1e-9, 1e-9, 0.03]), True)
 
 
 @pytest.mark.parametrize("cycle", ["udds", "hwfet"])

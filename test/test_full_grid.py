@@ -14,7 +14,7 @@ import pytest
 
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.method.full import whittle
-from rozyn_estimator.method.full.fit import (
+from rozyn_estimator.method.full.corner_matrices import (
     CORNER_VALUES,
     corner_matrices,
     corner_matrix_derivatives,

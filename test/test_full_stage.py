@@ -10,7 +10,8 @@ import pytest
 
 from rozyn_estimator.body_model import heave_index
 from rozyn_estimator.method import PipelineConfig
-from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES, corner_stiffness, fit_full_inertia, plane_map
+from rozyn_estimator.method.config import FULL_PARAM_NAMES
+from rozyn_estimator.method.fit import corner_stiffness, fit_inertia, plane_map
 from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.identification import (
     IdentificationError,
@@ -64,15 +65,15 @@ def test_free_decay_gives_all_five_parameters(columns):
     half car's default, which drops the unsprung masses) within 0.5 % on Table 5-1's car
     and within 1 % on a strongly asymmetric one with anti-roll bars."""
     body = _free_decay_modes(ASYMMETRIC, columns)
-    exact = fit_full_inertia(ASYMMETRIC, body, columns, "condensed")
+    exact = fit_inertia(ASYMMETRIC, body, "condensed", sensors=columns)
     assert np.abs(_error(exact, ASYMMETRIC)) == pytest.approx(np.zeros(5), abs=2e-4)
-    err = _error(fit_full_inertia(ASYMMETRIC, body, columns, "eq2-22"), ASYMMETRIC)
+    err = _error(fit_inertia(ASYMMETRIC, body, "eq2-22", sensors=columns), ASYMMETRIC)
     assert np.all(np.abs(err[:4]) < 0.01) and abs(err[4]) < 0.005
     raised = ASYMMETRIC.replace(cog_height_m=0.55, wheel_centre_height_m=0.3)  # gravity through the geometry
-    exact = fit_full_inertia(raised, _free_decay_modes(raised, columns), columns, "condensed")
+    exact = fit_inertia(raised, _free_decay_modes(raised, columns), "condensed", sensors=columns)
     assert np.abs(_error(exact, raised)) == pytest.approx(np.zeros(5), abs=2e-4)
     table = FullVehicle(cog_lateral_m=0.05)
-    err = _error(fit_full_inertia(table, _free_decay_modes(table, columns), columns, "eq2-22"), table)
+    err = _error(fit_inertia(table, _free_decay_modes(table, columns), "eq2-22", sensors=columns), table)
     assert np.all(np.abs(err[:4]) < 0.005) and abs(err[4]) < 0.005
 
 
@@ -171,7 +172,7 @@ def test_the_budget_adds_each_tolerance_as_its_effect_on_the_fit():
     assert {"statistics", "tyre stiffness", "tracks", "anti-roll bars", "sensor positions"} <= labels
     tyre = est.budget.contributions["tyre_stiffness_front_npm"]
     stiffer = v.replace(tyre_stiffness_npm=(1.1e5, 1.1e5, 1e5, 1e5))
-    refit = fit_full_inertia(stiffer, est.modes, (0, 1, 2, 3))
+    refit = fit_inertia(stiffer, est.modes, sensors=(0, 1, 2, 3))
     assert tyre == pytest.approx(refit - est.params, rel=0.1, abs=1e-6)
     # the track tolerance acts on the roll inertia and not much on the pitch inertia
     track = est.budget.contributions["track_front_m"]

@@ -11,7 +11,7 @@ from bag_helpers import write_imu_bag
 from rozyn_estimator.bag import open_bag
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PipelineConfig
-from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES
+from rozyn_estimator.method.config import FULL_PARAM_NAMES
 from rozyn_estimator.method.full.imu import stage_input
 from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.full.stage import estimate_full

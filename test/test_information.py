@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from rozyn_estimator.method import PipelineConfig
-from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES
+from rozyn_estimator.method.config import FULL_PARAM_NAMES
 from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.information import describe, information_lost
 from rozyn_estimator.online.records import OK, Update, layout_of, update_values

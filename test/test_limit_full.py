@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES
+from rozyn_estimator.method.config import FULL_PARAM_NAMES
 from rozyn_estimator.method.full.refine import refine
 from rozyn_estimator.tools.cli import main
 from rozyn_estimator.tools.trial.limit import infinite_data_limit, record_spectra

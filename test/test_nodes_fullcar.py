@@ -38,7 +38,7 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 from rozyn_estimator.bag import open_bag  # noqa: E402
 from rozyn_estimator.errors import ConfigError  # noqa: E402
 from rozyn_estimator.method import PipelineConfig  # noqa: E402
-from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES  # noqa: E402
+from rozyn_estimator.method.config import FULL_PARAM_NAMES  # noqa: E402
 from rozyn_estimator.method.full.stage import estimate_full  # noqa: E402
 from rozyn_estimator.online import CUSTOM_DATA_KEY, EstimatorConfig  # noqa: E402
 from rozyn_estimator.ros import messages as ros_io  # noqa: E402

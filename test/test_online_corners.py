@@ -11,7 +11,7 @@ import pytest
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PipelineConfig
-from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES
+from rozyn_estimator.method.config import FULL_PARAM_NAMES
 from rozyn_estimator.method.full.stage import FullEstimate, estimate_full
 from rozyn_estimator.online import (
     ERROR,

@@ -21,7 +21,7 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 from test_replay import CONFIG, _stream, _write
 
-from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES
+from rozyn_estimator.method.config import FULL_PARAM_NAMES
 from rozyn_estimator.tools import cli
 from rozyn_estimator.tools.replay import plot as replay_plot
 from rozyn_estimator.tools.replay import replay

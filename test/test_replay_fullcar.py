@@ -12,7 +12,7 @@ from bag_helpers import check_bag
 
 from rozyn_estimator.bag import open_bag
 from rozyn_estimator.method import METHODS
-from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES
+from rozyn_estimator.method.config import FULL_PARAM_NAMES
 from rozyn_estimator.online import CUSTOM_DATA_KEY, EstimatorConfig
 from rozyn_estimator.tools import cli
 from rozyn_estimator.tools.replay import replay

@@ -20,7 +20,7 @@ from dask_helpers import BIN, DaskProcesses
 from study_helpers import ctrl_c_at_chunk
 
 from rozyn_estimator.method import PARAM_NAMES
-from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES
+from rozyn_estimator.method.config import FULL_PARAM_NAMES
 from rozyn_estimator.tools.cars import FULL, HALF
 from rozyn_estimator.tools.cli import main
 from rozyn_estimator.tools.study import Cell, StudySettings, summarise_cells

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES
+from rozyn_estimator.method.config import FULL_PARAM_NAMES
 from rozyn_estimator.tools.cli import main
 from rozyn_estimator.tools.trial.run import simulate
 from rozyn_estimator.tools.trial.spec import TrialSpec

@@ -16,19 +16,23 @@ leaves (:mod:`rozyn_estimator.method.full.uncertainty.calibrate`).
 
 from __future__ import annotations
 
-import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
 
-from rozyn_estimator.method.config import PARAM_NAMES
+from rozyn_estimator.body_model import AnyVehicle
+from rozyn_estimator.method.config import FULL_PARAM_NAMES, PARAM_NAMES
 from rozyn_estimator.method.fit import fit_inertia
+from rozyn_estimator.method.full.uncertainty.moves import (
+    ABS_STEP,
+    axle_channels,
+    shifted_sensor,
+    vehicle_moves,
+)
 from rozyn_estimator.method.identification import IdentificationError, Mode
-from rozyn_estimator.tolerances import RELATIVE_FIELDS
-from rozyn_estimator.vehicle import Vehicle
 
 
 @dataclass(frozen=True)
@@ -73,8 +77,6 @@ GROUPS = {
     "sensor_time_offset": "sensor timing", "cog_height": "heights", "wheel_centre_height": "heights",
     "drive_model": "varying drive's model",
 }
-_REL_STEP = 1e-5
-_ABS_STEP = 1e-6
 
 
 def group_of(key: str) -> str:
@@ -142,49 +144,95 @@ class Budget:
         }
 
 
+_FULL_GROUPS = {**GROUPS, "track": "tracks", "anti_roll": "anti-roll bars",
+                "sensor_lateral": "sensor positions", "gyro_misalignment": "gyro turns"}
+
+
+class FullBudget(Budget):
+    """:class:`Budget` over the full car's five parameters and its own tolerances (tracks,
+    anti-roll bars, lateral sensor positions, gyro turns)."""
+
+    NAMES = FULL_PARAM_NAMES
+
+    @staticmethod
+    def group(key: str) -> str:
+        return next((label for prefix, label in _FULL_GROUPS.items() if key.startswith(prefix)), key)
+
+
 def _short(x: float, digits: int) -> str:
     return f"{x:.{digits}g}" if x >= 1e-3 or x == 0 else f"{x:.1e}"
 
 
 def rozyn_contributions(
-    vehicle: Vehicle, modes: Sequence[Mode], params: np.ndarray, model: str, kind: str,
-    tolerances: dict[str, float],
+    vehicle: AnyVehicle, modes: Sequence[Mode], params: np.ndarray, model: str, kind: str = "modal",
+    sensors: Sequence[int] | None = None, tolerances: dict[str, float] | None = None,
 ) -> dict[str, np.ndarray]:
-    """Contributions ``c_j`` of each toleranced value to Rozyn's linear fit (thesis 2-4): the
-    fit repeated on the same measured modes with the value moved a small step.
+    """Contributions ``c_j`` of each toleranced value to Rozyn's linear fit (thesis 2-4), either
+    car: the fit repeated on the same measured modes with the value moved a small step (forward
+    differences: the fit is smooth, the step tiny).
 
-    The sensors act on the modes: a gain on a channel scales its component of every mode
-    shape; the rear sensor's delay ``τ`` turns its component of a mode with pole ``s`` by
-    ``e^(-sτ)``. The common scale of both gains changes no shape and nothing in the fit.
+    ``tolerances`` as :meth:`~rozyn_estimator.tolerances.Tolerances.applying` gives them (None:
+    the vehicle's). The sensors act on the modes: a gain on a channel scales its component of
+    every mode shape; the rear sensors' delay ``τ`` turns their components of a mode with pole
+    ``s`` by ``e^(-sτ)``. The common scale of every gain changes no shape and nothing in the fit.
     """
+    index = tuple(range(len(vehicle.sensor_x_m))) if sensors is None else tuple(sensors)
+    given = vehicle.tolerances.applying(vehicle) if tolerances is None else tolerances
     out = {}
-    for key, u in tolerances.items():
-        h = _REL_STEP * abs(getattr(vehicle, key)) if key in RELATIVE_FIELDS else _ABS_STEP
-        try:
-            moved = _refit(vehicle, modes, model, kind, key, h)
-        except IdentificationError:  # at the edge of the physical range: the stage's own result stands
-            continue
-        out[key] = (moved - params) / h * u  # forward difference: the fit is smooth, h tiny
+    for key, tol in given.items():
+        for name, step, move in _moves(vehicle, key, index):
+            try:
+                moved_vehicle, sensed = move(step)
+                moved = fit_inertia(moved_vehicle, [sensed(md) for md in modes], model, kind, index)
+            except IdentificationError:  # at the edge of the physical range: the stage's result stands
+                continue
+            out[name] = (moved - params) / step * tol
     return out
 
 
-def _refit(
-    vehicle: Vehicle, modes: Sequence[Mode], model: str, kind: str, key: str, delta: float
-) -> np.ndarray:
-    if key.startswith("sensor_gain") or key == "sensor_time_offset_s":
-        return fit_inertia(vehicle, [_sensed(m, key, delta) for m in modes], model, kind)
-    moved = dataclasses.replace(vehicle, **{key: getattr(vehicle, key) + delta})
-    return fit_inertia(moved, modes, model, kind)
+Sensing = Callable[[Mode], Mode]
+Move = Callable[[float], tuple[AnyVehicle, Sensing]]
 
 
-def _sensed(mode: Mode, key: str, delta: float) -> Mode:
-    """The mode as a sensor with ``key`` moved by ``delta`` would have measured it (the
-    estimator then undoes what it assumes: here, the perturbation's inverse)."""
-    front, rear = mode.shape
-    if key == "sensor_gain_front":
-        front = front / (1.0 + delta)
-    elif key == "sensor_gain_rear":
-        rear = rear / (1.0 + delta)
-    else:
-        rear = rear * complex(np.exp(mode.eigenvalue * delta))
-    return Mode(mode.eigenvalue, (front, rear), mode.amplitude)
+def _same(md: Mode) -> Mode:
+    return md
+
+
+def _moves(v: AnyVehicle, key: str, sensors: tuple[int, ...]) -> list[tuple[str, float, Move]]:
+    """(contribution name, step, the vehicle and the sensing with the value moved by the step)."""
+    alike = vehicle_moves(v, key, sensors)
+    if alike is not None:
+        return [(name, step, _unsensed(move)) for name, step, move in alike]
+    axle = "front" if "_front" in key else "rear"
+    if key in ("sensor_front_offset_m", "sensor_rear_offset_m"):
+        def shifted(h: float) -> AnyVehicle:
+            out = v
+            for c in axle_channels(v, axle):
+                out = shifted_sensor(out, c, h)
+            return out
+        return [(key, ABS_STEP, _unsensed(shifted))]
+    if key.startswith("sensor_gain"):
+        # the estimator undoes the gain it assumes: the measured shape divided by (1 + h)
+        return [(key, ABS_STEP, lambda h: (v, _sensed(sensors, axle_channels(v, axle),
+                                                     lambda md: 1.0 / (1.0 + h))))]
+    if key == "sensor_time_offset_s":  # the rear sensors late by h: their components turned by e^(sh)
+        return [(key, ABS_STEP, lambda h: (v, _sensed(sensors, axle_channels(v, "rear"),
+                                                     lambda md: complex(np.exp(md.eigenvalue * h)))))]
+    return []
+
+
+def _unsensed(move: Callable[[float], AnyVehicle]) -> Move:
+    return lambda h: (move(h), _same)
+
+
+def _sensed(sensors: tuple[int, ...], channels: tuple[int, ...],
+            factor: Callable[[Mode], complex]) -> Sensing:
+    """Each mode with the components of the columns on ``channels`` times ``factor``."""
+    cols = [j for j, s in enumerate(sensors) if s in channels]
+
+    def apply(md: Mode) -> Mode:
+        shape = list(md.shape)
+        for j in cols:
+            shape[j] *= factor(md)
+        return Mode(md.eigenvalue, tuple(shape), md.amplitude)
+    return apply

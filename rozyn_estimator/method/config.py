@@ -13,6 +13,9 @@ from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.parameters import check, param
 
 PARAM_NAMES = ("mass_kg", "pitch_inertia_kgm2", "cog_from_front_axle_m")
+FULL_PARAM_NAMES = ("mass_kg", "roll_inertia_kgm2", "pitch_inertia_kgm2", "cog_from_front_axle_m",
+                    "cog_lateral_m")
+"""The full car's estimated parameters, in the order of its estimates and covariance."""
 CORRELATIONS = ("multi-reference", "thesis-acf", "free-decay")
 VARIANCES = ("jackknife", "none")
 REFINES = ("likelihood", "none")

@@ -337,11 +337,10 @@ def _with_budget(rozyn: Estimate, v: Vehicle, cfg: PipelineConfig) -> Estimate:
     """Rozyn's estimate as published: its covariance with the tolerances' contributions (only
     when it is the published one: the refinement, when it succeeds, has its own budget)."""
     v = stage_vehicle(v)
-    tolerances = v.tolerances.absolute(v)
-    if not (rozyn.ok and rozyn.params is not None and tolerances):
+    if not (rozyn.ok and rozyn.params is not None and v.tolerances.applying(v)):
         return rozyn
     budget = _budget(rozyn.covariance, rozyn_contributions(v, rozyn.modes, rozyn.params, cfg.stiffness_model,
-                                                           cfg.fit, tolerances))
+                                                           cfg.fit))
     if budget is None:
         return rozyn
     return dataclasses.replace(rozyn, covariance=budget.total, budget=budget)

@@ -17,7 +17,7 @@ import numpy as np
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PARAM_NAMES, Estimate
-from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES
+from rozyn_estimator.method.config import FULL_PARAM_NAMES
 from rozyn_estimator.method.full.stage import FullEstimate
 from rozyn_estimator.method.information import describe
 from rozyn_estimator.sensors import unit_suffix

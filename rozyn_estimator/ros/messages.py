@@ -32,7 +32,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PARAM_NAMES
-from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES
+from rozyn_estimator.method.config import FULL_PARAM_NAMES
 from rozyn_estimator.online import NS, Health, Update
 
 COVARIANCE_LABEL = ",".join(PARAM_NAMES)

@@ -75,10 +75,10 @@ from rozyn_estimator.method.full.whittle import WhittleObjective, ridged, scorin
 from rozyn_estimator.method.information import information_lost
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.fitcheck import neighbour_correlation, unsteady_fit
-from rozyn_estimator.method.likelihood.guards import NOISE_AT_ZERO, aground
-from rozyn_estimator.method.likelihood.road_input import steady_gates, steady_window, unsteady
+from rozyn_estimator.method.likelihood.guards import NOISE_AT_ZERO, aground, singular_floors
+from rozyn_estimator.method.likelihood.road_input import steady_window, unsteady, window_weights
 from rozyn_estimator.method.likelihood.score import SandwichRatio
-from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, taper_window, window_spectra
+from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, window_spectra
 
 _MIN_NOISE = 1e-9  # the model's fixed white floor, share of each channel's band power
 _FIRST_ITERATIONS = 25  # the first start's share of max_iter when a second may follow (noisy data: 3-15)
@@ -154,7 +154,8 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
                             kernel_m2_hz2=kernel, road_max_cpm=cfg.road_max_cpm,
                             sensor_values=None if assumed is None else assumed.values,
                             grid_hz=0.0 if _noise_free(warm, power, rolls(vehicle)) else cfg.grid_hz,
-                            sample_weights=_sample_weights(y.shape[0], vehicle.wheelbase_m, v, fs, cfg))
+                            sample_weights=window_weights(y.shape[0], cfg.taper, vehicle.wheelbase_m, v, fs,
+                                                          cfg.ramp_s))
     objective = WhittleObjective(model, periodogram, counts)
     best: OptimizeResult | None = None
     iterations = starts = 0
@@ -196,7 +197,8 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
         revived = aground(objective.fun, objective.jac, best.x, best.fun, model.noise_slice, power)
         if revived is not None:
             run(revived, max(1, cfg.max_iter - iterations))
-    if best is not None and model.grid_hz > 0 and _singular(_noise_share(best.x, model, power), model.rolls):
+    if best is not None and model.grid_hz > 0 and \
+            singular_floors(_noise_share(best.x, model, power), model.rolls):
         # nearly singular S: the interpolation's small errors matter
         found, best = best.x, None
         model = model.regrid(freq, kernel, 0.0)
@@ -322,31 +324,12 @@ def _spectra(y: np.ndarray, fs: float, band: tuple[float, float], taper: float,
     return given
 
 
-def _sample_weights(n: int, wheelbase_m: float, speed_mps: np.ndarray, fs_hz: float,
-                    cfg: LikelihoodConfig) -> np.ndarray | None:
-    """(n,) each sample's weight in a varying drive's road power: the square of the taper
-    times the steady stretches' gates (:func:`steady_gates`, as the data are cut); None for
-    one speed."""
-    if speed_mps.size == 1:
-        return None
-    return (taper_window(n, cfg.taper) * steady_gates(wheelbase_m, speed_mps, fs_hz, cfg.ramp_s)) ** 2
-
-
 def _noise_free(warm: Refinement | None, power: np.ndarray, two_tracks: bool) -> bool:
     """The previous window's fit ran so many noise floors to zero that S is nearly singular
     (:func:`_singular`): S at every frequency from the start."""
     if warm is None or warm.theta is None or not warm.noise_std_mps2:
         return False
-    return _singular(np.exp(warm.theta[-power.size:]) / power, two_tracks)
-
-
-def _singular(shares: np.ndarray, two_tracks: bool) -> bool:
-    """More channels noise-free (``shares``: each floor's share of its channel's power) than
-    the road has inputs (one track, or two): S is then singular but for the interpolation's
-    errors. One floor at zero among the half car's two leaves S as well conditioned as its
-    other floor (an urban window's MEMS noise is 2 % of its power, and its floor often runs
-    to zero within its std): the grid stands there."""
-    return int(np.count_nonzero(shares < NOISE_AT_ZERO)) > (2 if two_tracks else 1)
+    return singular_floors(np.exp(warm.theta[-power.size:]) / power, two_tracks)
 
 
 def _revived(objective: WhittleObjective, model: VehicleSpectrum, theta: np.ndarray,

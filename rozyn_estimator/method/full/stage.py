@@ -5,8 +5,8 @@ The half car's steps (:mod:`rozyn_estimator.method.pipeline`) on more channels: 
 multi-reference correlation functions of every channel pair (section 2-1), the state
 transition matrix's modes (2-2, 2-3), the three body modes (heave, pitch, roll) by the
 frequency and damping bands and their amplitude, the linear fit of
-:mod:`rozyn_estimator.method.full.fit`, the delete-one-block jackknife, and the tolerances'
-contributions (:mod:`rozyn_estimator.method.full.uncertainty.budget`): the published covariance is the
+:mod:`rozyn_estimator.method.full.corner_matrices`, the delete-one-block jackknife, and the tolerances'
+contributions (:func:`rozyn_estimator.method.budget.rozyn_contributions`): the published covariance is the
 jackknife's plus theirs.
 
 With ``refine="likelihood"`` (the pipeline's default) the likelihood refinement of the full
@@ -30,13 +30,13 @@ from typing import Any
 
 import numpy as np
 
-from rozyn_estimator.method.config import PipelineConfig
+from rozyn_estimator.method.budget import FullBudget, rozyn_contributions
+from rozyn_estimator.method.config import FULL_PARAM_NAMES, PipelineConfig
 from rozyn_estimator.method.correlation import correlation_sums, lag_range
 from rozyn_estimator.method.drive import constant_speed_only, varying_drive, window_speed
-from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES, fit_full_inertia
+from rozyn_estimator.method.fit import fit_inertia
 from rozyn_estimator.method.full.imu import stage_input
 from rozyn_estimator.method.full.refine import Refinement, refine
-from rozyn_estimator.method.full.uncertainty.budget import FullBudget, full_contributions
 from rozyn_estimator.method.glitches import InputError, checked_window
 from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
 from rozyn_estimator.method.imu import gyro_sign_problem
@@ -155,7 +155,8 @@ def _rozyn_stage(y: np.ndarray, fs_hz: float, vehicle: FullVehicle, cfg: Pipelin
                             elapsed_ms=(time.perf_counter() - started) * 1e3)
     budget = None
     if cov is not None and vehicle.tolerances.any:
-        budget = FullBudget(cov, full_contributions(vehicle, modes, index, params, cfg.stiffness_model))
+        contributions = rozyn_contributions(vehicle, modes, params, cfg.stiffness_model, sensors=index)
+        budget = FullBudget(cov, contributions)
         cov = budget.total
     return FullEstimate(status="ok", params=params, covariance=cov, modes=modes, sensors=tuple(sensors),
                         n_samples=n, elapsed_ms=(time.perf_counter() - started) * 1e3, notes=notes,
@@ -261,7 +262,7 @@ def _identify(
     p_blocks = math.ceil(cfg.gamma * 2 * max(cfg.n_dof, N_DOF_FULL) / y.shape[1])  # eq 2-5
     identified = IDENTIFIERS[cfg.identifier](decays, dt, p_blocks)
     body = select_body_modes(identified[0], cfg.freq_band_hz, cfg.damping_band, n_modes=N_BODY_MODES)
-    params = fit_full_inertia(v, body, index, cfg.stiffness_model)
+    params = fit_inertia(v, body, cfg.stiffness_model, sensors=index)
     if not jackknife:
         return params, None, tuple(body), ()
     replicates = np.full((blocks, params.size), np.nan)
@@ -269,7 +270,7 @@ def _identify(
         try:
             near = select_body_modes(modes, cfg.freq_band_hz, cfg.damping_band, n_modes=N_BODY_MODES,
                                      near=body)
-            replicates[b] = fit_full_inertia(v, near, index, cfg.stiffness_model)
+            replicates[b] = fit_inertia(v, near, cfg.stiffness_model, sensors=index)
         except (IdentificationError, np.linalg.LinAlgError):
             pass
     cov, good = jackknife_covariance(replicates, params)

@@ -1,6 +1,7 @@
 """Guards of a fit's optimum shared by the refinement and the calibration: a noise floor run
 aground revived (:func:`aground`), a step backtracked until it does not lose (:func:`backtracked`),
-and where a floor counts as zero (:data:`NOISE_AT_ZERO`)."""
+where a floor counts as zero (:data:`NOISE_AT_ZERO`) and when floors at zero make S singular
+(:func:`singular_floors`)."""
 
 from __future__ import annotations
 
@@ -56,3 +57,12 @@ def backtracked(
             return point + step
         step = 0.5 * step
     return point
+
+
+def singular_floors(shares: np.ndarray, two_tracks: bool) -> bool:
+    """More channels noise-free (``shares``: each floor's share of its channel's power) than
+    the road has inputs (one track, or two): S is then singular but for the interpolation's
+    errors. One floor at zero among the half car's two leaves S as well conditioned as its
+    other floor (an urban window's MEMS noise is 2 % of its power, and its floor often runs
+    to zero within its std): the grid stands there."""
+    return int(np.count_nonzero(shares < NOISE_AT_ZERO)) > (2 if two_tracks else 1)

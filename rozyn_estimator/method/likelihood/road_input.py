@@ -13,6 +13,8 @@ from collections import OrderedDict
 import numpy as np
 from scipy import special
 
+from rozyn_estimator.method.likelihood.spectra import taper_window
+
 
 def delay_characteristic(omega: np.ndarray, wheelbase_m: float, speed_mps: float | np.ndarray,
                          sample_weights: np.ndarray | None = None) -> np.ndarray:
@@ -157,6 +159,17 @@ def steady_gates(wheelbase_m: float, speed_mps: np.ndarray, fs_hz: float, ramp_s
             keep[lo:lo + r] *= rise
             keep[hi - r:hi] *= rise[::-1]
     return keep
+
+
+def window_weights(n: int, taper: float, wheelbase_m: float, speed_mps: np.ndarray, fs_hz: float,
+                   ramp_s: float) -> np.ndarray | None:
+    """(n,) each sample's weight in a varying drive's road power: the square of the taper
+    (:func:`~rozyn_estimator.method.likelihood.spectra.taper_window`) times the steady
+    stretches' gates (:func:`steady_gates`, as :func:`steady_window` cuts the data); None for
+    one speed."""
+    if np.size(speed_mps) == 1:
+        return None
+    return (taper_window(n, taper) * steady_gates(wheelbase_m, np.asarray(speed_mps), fs_hz, ramp_s)) ** 2
 
 
 def unsteady(wheelbase_m: float, speed_mps: float | np.ndarray, fs_hz: float) -> bool:

@@ -25,7 +25,7 @@ from typing import cast
 import numpy as np
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.method.full.fit import FULL_PARAM_NAMES
+from rozyn_estimator.method.config import FULL_PARAM_NAMES
 from rozyn_estimator.method.full.refine import Refinement, refine
 from rozyn_estimator.method.likelihood.spectra import Spectra, window_spectra
 from rozyn_estimator.tools.cars import FULL

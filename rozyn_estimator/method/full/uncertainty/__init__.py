@@ -1,6 +1,6 @@
-"""The full car's uncertainty budget and self-calibration (internal to its estimator).
+"""The refinement's uncertainty budget and self-calibration, for either car (internal to it).
 
-- ``budget``: Rozyn's stage's budget (the linear fit repeated with each value moved);
+- ``moves``: how a tolerance moves either vehicle (Rozyn's stage's budget moves them too);
 - ``refine_budget``: what each value left assumed contributes to the refined estimate;
 - ``calibrate``: the sensors and corner values calibrated by the data (the augmented
   posterior), with ``sensing`` (the sensors' gains, positions, delay) and ``corners`` (each

@@ -1,7 +1,7 @@
 """The full car's corner values as the data may calibrate them: each toleranced axle's springs,
 dampers, tyres and unsprung masses and each anti-roll bar, as a share of the vehicle file's
 value (as the tolerances state them and both budgets move them:
-:func:`~rozyn_estimator.method.full.uncertainty.budget.vehicle_moves`, an axle's share on both its
+:func:`~rozyn_estimator.method.full.uncertainty.moves.vehicle_moves`, an axle's share on both its
 corners).
 
 :class:`CornerCalibrating` adds those shares to a :class:`~.spectrum.VehicleSpectrum`'s θ

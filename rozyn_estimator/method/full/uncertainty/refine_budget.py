@@ -11,7 +11,8 @@ and tracks :func:`~.geometry.geometry_derivatives`, each in one pass); for any o
 model's change with the value moved a small step.
 Per toleranced value: that move times its tolerance,
 mapped to ``(m, I_xx, I_yy, l_f, y_c)``. The keys follow the Rozyn stage's budget
-(:mod:`rozyn_estimator.method.full.uncertainty.budget`): an axle's share applies to both its corners,
+(:func:`rozyn_estimator.method.full.uncertainty.moves.vehicle_moves`): an axle's share applies
+to both its corners,
 a sensor's position or gain to each sensor on its own (independent errors: one
 contribution each), the time offset to the rear sensors against the front ones.
 
