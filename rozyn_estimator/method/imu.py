@@ -1,45 +1,64 @@
-"""An IMU's accelerometer and pitch gyro as the two vertical accelerations Rozyn's stage reads
-(the full car's: :mod:`rozyn_estimator.method.full.imu`).
+"""A sensors block (an IMU's accelerometer and gyros, or any channels that see the body's
+motions) as the vertical accelerations at the corners Rozyn's stage reads, either car; and the
+gyros' sign check before either stage (:func:`gyro_sign_problem`).
 
-Rozyn's stage (the thesis' method) identifies the body's modes from two vertical
-accelerations. An IMU gives one vertical acceleration ``a(x)`` at its position and the pitch
-rate ``gyro_y = -φ'`` (REP 103: positive nose down). A rigid body's point at ``x'`` then
-accelerates ``a(x') = a(x) + (x - x') φ''``, so the stage reads the equivalent accelerations at
-the axles, the pitch acceleration from the gyro's central difference (its gain
-``sin(ωΔ)/(ωΔ)`` is within 0.3 % of a derivative's up to 2 Hz at 100 Hz: the stage only starts
-the likelihood fit, which models the gyro exactly). The differenced gyro's noise rises with
-frequency; the stage's band (the body modes) is where it is smallest.
+Rozyn's stage (the thesis' method) identifies the body's modes from vertical accelerations at
+known points. A block's channels give the body's accelerations ``(z₀'', φ''[, θ''])`` by least
+squares on their rows (:func:`~rozyn_estimator.body_model.channel_rows`; one IMU's accel_z
+and gyro_y give the half car's two exactly), a gyro's rate differenced: ``gyro_y = -φ'`` (REP
+103: positive nose down), so ``φ'' = -d(gyro_y)/dt``. A rigid body's corner at ``(x_c, y_c)``
+then accelerates ``z₀'' - x_c φ'' + y_c θ''``. The central difference's gain ``sin(ωΔ)/(ωΔ)``
+is within 0.3 % of a derivative's up to 2 Hz at 100 Hz: the stage only starts the likelihood
+fit, which models each channel exactly. The differenced gyro's noise rises with frequency;
+the stage's band (the body modes) is where it is smallest.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TypeVar
 
 import numpy as np
 from scipy import signal
 
-from rozyn_estimator.body_model import AnyVehicle
+from rozyn_estimator.body_model import AnyVehicle, channel_rows, corners_of, rolls
 from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import FullVehicle
 
+V = TypeVar("V", Vehicle, FullVehicle)
 
-def stage_vehicle(vehicle: Vehicle) -> Vehicle:
-    """The vehicle Rozyn's stage fits: an IMU's equivalent accelerometers at the axles."""
-    if not vehicle.pitch_gyro:
+
+def _converted(v: AnyVehicle) -> bool:
+    """The stage reads the block through the corners: it holds a gyro, or (the full car) any
+    block (the stage's plane reads accelerometers at the corners' places)."""
+    return v.sensors is not None and (rolls(v) or any(kind != "accel_z" for kind in v.channel_kinds))
+
+
+def stage_vehicle(vehicle: V) -> V:
+    """The vehicle Rozyn's stage fits: a sensors block's equivalent accelerometers at the corners."""
+    if not _converted(vehicle):
         return vehicle
+    if isinstance(vehicle, FullVehicle):
+        return vehicle.replace(sensors=None, sensor_x_m=vehicle.corner_x_m, sensor_y_m=vehicle.corner_y_m)
     return vehicle.replace(sensors=None, sensor_front_offset_m=0.0, sensor_rear_offset_m=0.0)
 
 
-def stage_input(y: np.ndarray, fs_hz: float, vehicle: Vehicle) -> tuple[np.ndarray, Vehicle]:
-    """(n, 2) the window as Rozyn's stage reads it, and the vehicle it reads it with: as given
-    for two accelerometers; for an IMU (accel_z, gyro_y) the accelerations at the two axles."""
-    if not vehicle.pitch_gyro:
-        return y, vehicle
-    x = vehicle.sensor_x_m[0]
-    pitch_accel = -np.gradient(y[:, 1], 1.0 / fs_hz)  # φ'' = -d(gyro_y)/dt
-    axles = np.array([0.0, vehicle.wheelbase_m])
-    return y[:, :1] + (x - axles) * pitch_accel[:, None], stage_vehicle(vehicle)
+def stage_input(y: np.ndarray, fs_hz: float, vehicle: V,
+                index: tuple[int, ...] | None = None) -> tuple[np.ndarray, V, tuple[int, ...]]:
+    """(the window as Rozyn's stage reads it, the vehicle and the columns' sensors it reads it
+    with): as given for accelerometers (``index`` the columns' sensors, None: all); for a
+    sensors block the corners' accelerations from the body's (module docstring)."""
+    index = tuple(range(y.shape[1])) if index is None else tuple(index)
+    if not _converted(vehicle):
+        return y, vehicle, index
+    rows, rate = channel_rows(vehicle, index)
+    data = np.array(y, dtype=float)
+    data[:, rate] = np.gradient(data[:, rate], 1.0 / fs_hz, axis=0)  # a rate's derivative
+    body = np.linalg.lstsq(rows, data.T, rcond=None)[0]  # (b, n): z₀'', φ''[, θ'']
+    c = corners_of(vehicle)
+    cols = [np.ones(c.count), -c.x_m, c.y_m][: rows.shape[1]]
+    return (np.column_stack(cols) @ body).T, stage_vehicle(vehicle), tuple(range(c.count))
 
 
 def gyro_sign_problem(y: np.ndarray, fs_hz: float, vehicle: AnyVehicle,

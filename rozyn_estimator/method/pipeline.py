@@ -175,7 +175,7 @@ def _rozyn_stage(
     started: float,
 ) -> Estimate:
     """Rozyn's pipeline on the checked, demeaned window (an IMU's: :mod:`.imu`)."""
-    (y, vehicle), n, dt = stage_input(y, fs_hz, vehicle), int(y.shape[0]), 1.0 / fs_hz
+    (y, vehicle, _), n, dt = stage_input(y, fs_hz, vehicle), int(y.shape[0]), 1.0 / fs_hz
     try:
         first, last = lag_range(cfg, fs_hz, vehicle, speed_mps)
         if cfg.correlation == "free-decay":

@@ -35,11 +35,10 @@ from rozyn_estimator.method.config import FULL_PARAM_NAMES, PipelineConfig
 from rozyn_estimator.method.correlation import correlation_sums, lag_range
 from rozyn_estimator.method.drive import constant_speed_only, varying_drive, window_speed
 from rozyn_estimator.method.fit import fit_inertia
-from rozyn_estimator.method.full.imu import stage_input
 from rozyn_estimator.method.full.refine import Refinement, refine
 from rozyn_estimator.method.glitches import InputError, checked_window
 from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
-from rozyn_estimator.method.imu import gyro_sign_problem
+from rozyn_estimator.method.imu import gyro_sign_problem, stage_input
 from rozyn_estimator.method.load_transfer import carries_load_transfer, fit_without_load_transfer
 from rozyn_estimator.method.variance import jackknife_covariance
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
