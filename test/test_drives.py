@@ -18,7 +18,9 @@ from rozyn_estimator.method.likelihood.road_input import (
     steady_window,
     track_mixture,
     travel_delays,
+    window_weights,
 )
+from rozyn_estimator.method.likelihood.spectra import taper_window
 from rozyn_estimator.online import NS, OnlineConfig, OnlineEstimator
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.vehicle import Vehicle
@@ -92,6 +94,28 @@ def test_steady_stretches_are_ramped_in_and_out():
     y = np.random.default_rng(1).standard_normal((v.size, 2)) + 3.0
     out = steady_window(y, L, v, fs, 6.0)
     np.testing.assert_allclose(out, gates[:, None] * (y - y[square].mean(axis=0)))
+
+
+def test_the_model_weighs_each_sample_by_its_window_as_the_data_are_cut():
+    """A varying drive's sample weights are the square of what multiplies its data: the taper
+    times the stretches' gates. A stop weighs nothing, a stretch's middle the taper's square,
+    its ramps less (rising from the stop); one speed has none."""
+    fs, L, n = 100.0, 2.8, 7800
+    v = np.r_[np.full(3000, 15.0), np.zeros(1000), np.linspace(15.0, 20.0, 3800)]
+    w = window_weights(n, 0.2, L, v, fs, 3.0)
+    taper2 = taper_window(n, 0.2) ** 2
+    steady = steady_driving(L, v, fs)
+    assert np.all(w[~steady] == 0.0)
+    start = np.flatnonzero(steady[3000:])[0] + 3000  # the stretch after the stop
+    ramp = slice(start, start + 300)
+    assert np.all(np.diff(w[ramp] / taper2[ramp]) > 0) and w[start] < 0.01 * taper2[start]
+    np.testing.assert_allclose(w[start + 300: start + 2000], taper2[start + 300: start + 2000])
+    y = np.random.default_rng(2).standard_normal((n, 1))
+    gated = steady_window(y, L, v, fs, 3.0)[:, 0]
+    nonzero = (gated != 0) & (taper2 > 0)
+    np.testing.assert_allclose(np.sqrt(w[nonzero] / taper2[nonzero]) * (y[nonzero, 0] - y[steady, 0].mean()),
+                               gated[nonzero])
+    assert window_weights(n, 0.2, L, np.array([15.0]), fs, 3.0) is None
 
 
 def test_one_imu_in_town_is_covered():
