@@ -8,7 +8,7 @@ import pytest
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS, LikelihoodConfig, PipelineConfig, estimate
 from rozyn_estimator.method.fit import corner_impedances
-from rozyn_estimator.method.pipeline import _decays, _identify_and_fit
+from rozyn_estimator.method.modal_stage import fit_correlations
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation
@@ -70,7 +70,7 @@ def test_exact_correlations_recover_the_truth(vehicle, speed_kmh):
     speed = speed_kmh / 3.6
     first = int(np.ceil(vehicle.wheelbase_m / speed * 100))
     corr = exact_correlations(vehicle, speed, 100.0, first + 100)
-    params = _identify_and_fit(_decays(corr, first, cfg)[None], 0.01, vehicle, cfg)[0][0]
+    params, _ = fit_correlations(corr, first, 100.0, vehicle, cfg)
     assert np.all(np.abs(params / TRUTH - 1) < 1e-4)
 
 

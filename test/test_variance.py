@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rozyn_estimator.method.variance import jackknife_covariance
+from rozyn_estimator.method.modal_stage import jackknife_covariance
 
 
 def replicates(g: int = 10, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:

@@ -28,16 +28,15 @@ import numpy as np
 
 from rozyn_estimator.method.budget import Budget, Calibration, rozyn_contributions
 from rozyn_estimator.method.config import PARAM_NAMES, PipelineConfig
-from rozyn_estimator.method.correlation import correlation_sums, lag_range
 from rozyn_estimator.method.drive import constant_speed_only, varying_drive, window_speed
-from rozyn_estimator.method.fit import axle_shapes, characteristic_matrix, fit_inertia
+from rozyn_estimator.method.fit import axle_shapes, characteristic_matrix
 from rozyn_estimator.method.full.refine import refine
 from rozyn_estimator.method.full.result import Refinement
 from rozyn_estimator.method.glitches import InputError, checked_window
-from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
+from rozyn_estimator.method.identification import IdentificationError, Mode
 from rozyn_estimator.method.imu import gyro_sign_problem, stage_input, stage_vehicle
 from rozyn_estimator.method.load_transfer import carries_load_transfer, fit_without_load_transfer
-from rozyn_estimator.method.variance import jackknife_covariance
+from rozyn_estimator.method.modal_stage import rozyn_fit
 from rozyn_estimator.vehicle import Vehicle
 
 
@@ -175,40 +174,12 @@ def _rozyn_stage(
     started: float,
 ) -> Estimate:
     """Rozyn's pipeline on the checked, demeaned window (an IMU's: :mod:`.imu`)."""
-    (y, vehicle, _), n, dt = stage_input(y, fs_hz, vehicle), int(y.shape[0]), 1.0 / fs_hz
+    (y, vehicle, _), n = stage_input(y, fs_hz, vehicle), int(y.shape[0])
     try:
-        first, last = lag_range(cfg, fs_hz, vehicle, speed_mps)
-        if cfg.correlation == "free-decay":
-            params, modes = _first_or_raise(_identify_and_fit(y[None, None, first:], dt, vehicle, cfg))
-            return _done(started, n, vehicle, params, None, modes)
-        jackknife = cfg.variance == "jackknife"
-        blocks = cfg.jackknife_blocks if jackknife else 1
-        if n < blocks * (last + 1) or n < 4 * (last + 1):
-            raise InputError(
-                f"window too short for {cfg.max_lag_s:g} s of correlation lags in {blocks} blocks: "
-                f"{n / fs_hz:.1f} s"
-            )
-        sums = correlation_sums(y, last, blocks)
-        total = sums.sum(axis=0)
-        records = [total]
-        if jackknife:
-            # Replicate b: the record without block b's lagged products.
-            records += [total - sums[b] for b in range(blocks)]
-        decays = np.stack([_decays(r, first, cfg) for r in records])
-        params, modes = _first_or_raise(_identify_and_fit(decays[:1], dt, vehicle, cfg))
-        if not jackknife:
-            return _done(started, n, vehicle, params, None, modes)
-        fits = _identify_and_fit(decays[1:], dt, vehicle, cfg, near=modes)
-        replicates = np.array([np.full(3, np.nan) if isinstance(f, Exception) else f[0] for f in fits])
-        cov, good = jackknife_covariance(replicates, params)
-        if cov is None:
-            raise IdentificationError(
-                f"unstable identification: only {good} of {blocks} jackknife replicates found the modes"
-            )
-        notes = () if good == blocks else (f"{blocks - good} of {blocks} jackknife replicates failed",)
-        return _done(started, n, vehicle, params, cov, modes, notes)
+        params, cov, modes, notes = rozyn_fit(y, fs_hz, vehicle, cfg, speed_mps)
     except (InputError, IdentificationError, np.linalg.LinAlgError) as exc:
         return _failed(str(exc), n, started)
+    return _done(started, n, vehicle, params, cov, modes, notes)
 
 
 def _failed(reason: str, n: int, started: float, **extra: Any) -> Estimate:
@@ -276,41 +247,6 @@ def _warm(warm_start: Estimate | np.ndarray | None) -> Refinement | None:
     if isinstance(warm_start, Estimate) and warm_start.refinement is not None and warm_start.refinement.ok:
         return warm_start.refinement
     return None
-
-
-def _decays(corr: np.ndarray, first: int, cfg: PipelineConfig) -> np.ndarray:
-    """(n_refs, n_lags, 2) free-decay sequences from (lags, 2, 2) correlation sums."""
-    if cfg.correlation == "thesis-acf":
-        acf = np.column_stack([corr[:, 0, 0] / corr[0, 0, 0], corr[:, 1, 1] / corr[0, 1, 1]])
-        return acf[None, first:]
-    return corr[first:].transpose(2, 0, 1)  # reference j: [R_fj(tau), R_rj(tau)]
-
-
-Fit = tuple[np.ndarray, tuple[Mode, ...]] | IdentificationError
-
-
-def _identify_and_fit(
-    decays: np.ndarray, dt: float, v: Vehicle, cfg: PipelineConfig, near: tuple[Mode, ...] | None = None
-) -> list[Fit]:
-    """Identify and fit each record of a (batch, refs, lags, 2) stack of decays.
-
-    The first record picks its body modes by amplitude; with ``near``, every record
-    takes the modes closest to those instead.
-    """
-    out: list[Fit] = []
-    for modes in IDENTIFIERS[cfg.identifier](decays, dt, cfg.p_blocks):
-        try:
-            body = select_body_modes(modes, cfg.freq_band_hz, cfg.damping_band, near=near)
-            out.append((fit_inertia(v, body, cfg.stiffness_model, cfg.fit), tuple(body)))
-        except IdentificationError as exc:
-            out.append(exc)
-    return out
-
-
-def _first_or_raise(fits: list[Fit]) -> tuple[np.ndarray, tuple[Mode, ...]]:
-    if isinstance(fits[0], IdentificationError):
-        raise fits[0]
-    return fits[0]
 
 
 def _budget(statistical: np.ndarray | None, contributions: dict[str, np.ndarray],

@@ -22,7 +22,6 @@ number.
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -32,19 +31,14 @@ import numpy as np
 
 from rozyn_estimator.method.budget import FullBudget, rozyn_contributions
 from rozyn_estimator.method.config import FULL_PARAM_NAMES, PipelineConfig
-from rozyn_estimator.method.correlation import correlation_sums, lag_range
 from rozyn_estimator.method.drive import constant_speed_only, varying_drive, window_speed
-from rozyn_estimator.method.fit import fit_inertia
 from rozyn_estimator.method.full.refine import Refinement, refine
 from rozyn_estimator.method.glitches import InputError, checked_window
-from rozyn_estimator.method.identification import IDENTIFIERS, IdentificationError, Mode, select_body_modes
+from rozyn_estimator.method.identification import IdentificationError, Mode
 from rozyn_estimator.method.imu import gyro_sign_problem, stage_input
 from rozyn_estimator.method.load_transfer import carries_load_transfer, fit_without_load_transfer
-from rozyn_estimator.method.variance import jackknife_covariance
+from rozyn_estimator.method.modal_stage import rozyn_fit
 from rozyn_estimator.vehicle_full import CORNERS, FullVehicle
-
-N_DOF_FULL = 7  # eq 2-4's n for the full car: body heave, pitch, roll and four wheels
-N_BODY_MODES = 3
 
 
 @dataclass(frozen=True)
@@ -148,7 +142,7 @@ def _rozyn_stage(y: np.ndarray, fs_hz: float, vehicle: FullVehicle, cfg: Pipelin
     n = int(y.shape[0])
     y, vehicle, index = stage_input(y, fs_hz, vehicle, index)  # a sensors block's: the corners'
     try:
-        params, cov, modes, notes = _identify(y, fs_hz, vehicle, cfg, window_speed(speed_mps)[0], index)
+        params, cov, modes, notes = rozyn_fit(y, fs_hz, vehicle, cfg, window_speed(speed_mps)[0], index)
     except (InputError, IdentificationError, np.linalg.LinAlgError) as exc:
         return FullEstimate(status="failed", reason=str(exc), n_samples=n, sensors=tuple(sensors),
                             elapsed_ms=(time.perf_counter() - started) * 1e3)
@@ -237,44 +231,3 @@ def _sensor_indices(sensors: Sequence[str], vehicle: FullVehicle) -> tuple[int, 
         raise InputError(f"full car: sensors must be 3 or 4 distinct corners of {', '.join(CORNERS)}; "
                           f"got {', '.join(sensors) or 'none'}")
     return tuple(CORNERS.index(s) for s in sensors)
-
-
-def _identify(
-    y: np.ndarray, fs_hz: float, v: FullVehicle, cfg: PipelineConfig, speed_mps: float | None,
-    index: tuple[int, ...],
-) -> tuple[np.ndarray, np.ndarray | None, tuple[Mode, ...], tuple[str, ...]]:
-    """(params, jackknife covariance or None, the body modes, notes); raises on failure."""
-    n, dt = y.shape[0], 1.0 / fs_hz
-    first, last = lag_range(cfg, fs_hz, v, speed_mps)
-    if first == 0:  # always the multi-reference decays here: lag 0 carries the sensor noise variance
-        first, last = 1, last + 1
-    jackknife = cfg.variance == "jackknife"
-    blocks = cfg.jackknife_blocks if jackknife else 1
-    if n < blocks * (last + 1) or n < 4 * (last + 1):
-        raise InputError(f"window too short for {cfg.max_lag_s:g} s of correlation lags in {blocks} blocks: "
-                          f"{n / fs_hz:.1f} s")
-    sums = correlation_sums(y, last, blocks)
-    total = sums.sum(axis=0)
-    records = [total] + ([total - sums[b] for b in range(blocks)] if jackknife else [])
-    # reference j: [R_0j(tau), ..., R_kj(tau)] (multi-reference free decays)
-    decays = np.stack([r[first:].transpose(2, 0, 1) for r in records])
-    p_blocks = math.ceil(cfg.gamma * 2 * max(cfg.n_dof, N_DOF_FULL) / y.shape[1])  # eq 2-5
-    identified = IDENTIFIERS[cfg.identifier](decays, dt, p_blocks)
-    body = select_body_modes(identified[0], cfg.freq_band_hz, cfg.damping_band, n_modes=N_BODY_MODES)
-    params = fit_inertia(v, body, cfg.stiffness_model, sensors=index)
-    if not jackknife:
-        return params, None, tuple(body), ()
-    replicates = np.full((blocks, params.size), np.nan)
-    for b, modes in enumerate(identified[1:]):
-        try:
-            near = select_body_modes(modes, cfg.freq_band_hz, cfg.damping_band, n_modes=N_BODY_MODES,
-                                     near=body)
-            replicates[b] = fit_inertia(v, near, cfg.stiffness_model, sensors=index)
-        except (IdentificationError, np.linalg.LinAlgError):
-            pass
-    cov, good = jackknife_covariance(replicates, params)
-    if cov is None:
-        raise IdentificationError(f"unstable identification: only {good} of {blocks} jackknife replicates "
-                                  "found the modes")
-    notes = () if good == blocks else (f"{blocks - good} of {blocks} jackknife replicates failed",)
-    return params, cov, tuple(body), notes
