@@ -326,7 +326,8 @@ def _spectra(y: np.ndarray, fs: float, band: tuple[float, float], taper: float,
 
 def _noise_free(warm: Refinement | None, power: np.ndarray, two_tracks: bool) -> bool:
     """The previous window's fit ran so many noise floors to zero that S is nearly singular
-    (:func:`_singular`): S at every frequency from the start."""
+    (:func:`~rozyn_estimator.method.likelihood.guards.singular_floors`): S at every frequency
+    from the start."""
     if warm is None or warm.theta is None or not warm.noise_std_mps2:
         return False
     return singular_floors(np.exp(warm.theta[-power.size:]) / power, two_tracks)

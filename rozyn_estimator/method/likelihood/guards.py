@@ -63,6 +63,6 @@ def singular_floors(shares: np.ndarray, two_tracks: bool) -> bool:
     """More channels noise-free (``shares``: each floor's share of its channel's power) than
     the road has inputs (one track, or two): S is then singular but for the interpolation's
     errors. One floor at zero among the half car's two leaves S as well conditioned as its
-    other floor (an urban window's MEMS noise is 2 % of its power, and its floor often runs
+    other floor (an urban window's MEMS noise is about 1 % of its power, and its floor often runs
     to zero within its std): the grid stands there."""
     return int(np.count_nonzero(shares < NOISE_AT_ZERO)) > (2 if two_tracks else 1)
