@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.method.fit import (
-    axle_shapes,
     characteristic_matrix,
     corner_impedances,
+    corner_shapes,
     fit_inertia,
-    sensor_to_axle,
+    plane_map,
 )
 from rozyn_estimator.method.identification import IdentificationError, Mode
 from rozyn_estimator.vehicle import Vehicle
@@ -64,16 +64,16 @@ def test_eq_2_22_is_close_and_eq_2_21_biased_on_exact_modes(vehicle):
 def test_characteristic_matrix_has_the_modes_as_eigenvalues(vehicle):
     modes = body_modes(vehicle)
     poles = np.array([m.eigenvalue for m in modes])
-    a0 = characteristic_matrix(poles, axle_shapes(vehicle, modes))
+    a0 = characteristic_matrix(poles, corner_shapes(vehicle, modes))
     assert np.sort_complex(np.linalg.eigvals(a0)) == pytest.approx(
         np.sort_complex(np.r_[poles, poles.conj()]), rel=1e-9)
 
 
-def test_sensor_to_axle_undoes_the_sensor_positions():
+def test_the_line_through_the_sensors_gives_the_axles():
     axles = np.array([0.3, -0.1])  # axle heaves
     L = OTHER.wheelbase_m
     sensors = np.array([[1 - x / L, x / L] for x in OTHER.sensor_x_m]) @ axles
-    assert sensor_to_axle(OTHER) @ sensors == pytest.approx(axles)
+    assert plane_map(OTHER.sensor_x_m, OTHER.sensor_y_m, OTHER) @ sensors == pytest.approx(axles)
 
 
 def test_corner_impedances_static_limit_and_unknown_model(vehicle):

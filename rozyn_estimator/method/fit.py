@@ -126,11 +126,6 @@ def plane_map(points_x_m: Sequence[float], points_y_m: Sequence[float], v: AnyVe
     return _body_columns(c.x_m, c.y_m, v) @ np.linalg.pinv(pts)
 
 
-def sensor_to_axle(v: Vehicle) -> np.ndarray:
-    """(2, 2) map from the half car's sensor amplitudes to its axle amplitudes."""
-    return plane_map(v.sensor_x_m, v.sensor_y_m, v)
-
-
 def corner_shapes(v: AnyVehicle, modes: Sequence[Mode], sensors: Sequence[int] | None = None) -> np.ndarray:
     """(corners, n_modes) complex mode shapes at the corners, each of unit norm, from the
     shapes at the accelerometers ``sensors`` (indices into the vehicle's; None: all)."""
@@ -138,11 +133,6 @@ def corner_shapes(v: AnyVehicle, modes: Sequence[Mode], sensors: Sequence[int] |
     xs, ys = [v.sensor_x_m[i] for i in index], [v.sensor_y_m[i] for i in index]
     shapes = plane_map(xs, ys, v) @ np.array([md.shape for md in modes]).T
     return shapes / np.linalg.norm(shapes, axis=0)
-
-
-def axle_shapes(v: Vehicle, modes: Sequence[Mode]) -> np.ndarray:
-    """(2, n_modes) the half car's complex mode shapes at the axles, each of unit norm."""
-    return corner_shapes(v, modes)
 
 
 def characteristic_matrix(poles: np.ndarray, shapes: np.ndarray) -> np.ndarray:

@@ -78,15 +78,10 @@ def rozyn_fit(y: np.ndarray, fs_hz: float, v: AnyVehicle, cfg: PipelineConfig, s
     if rolls(v):  # the full car's decays are always the multi-reference ones
         cfg = cfg.replace(correlation="multi-reference")
     first, last = lag_range(cfg, fs_hz, v, speed_mps)
-    p_blocks, (n_modes, kind) = _p_blocks(cfg, v, y.shape[1]), _body(cfg, v)
-
-    def fitted(modes: list[Mode], near: tuple[Mode, ...] | None = None,
-               ) -> tuple[np.ndarray, tuple[Mode, ...]]:
-        body = select_body_modes(modes, cfg.freq_band_hz, cfg.damping_band, n_modes=n_modes, near=near)
-        return fit_inertia(v, body, cfg.stiffness_model, kind, sensors), tuple(body)
-
+    p_blocks = _p_blocks(cfg, v, y.shape[1])
     if cfg.correlation == "free-decay":
-        params, modes = fitted(IDENTIFIERS[cfg.identifier](y[None, None, first:], dt, p_blocks)[0])
+        params, modes = _fitted(IDENTIFIERS[cfg.identifier](y[None, None, first:], dt, p_blocks)[0], v, cfg,
+                                sensors)
         return params, None, modes, ()
     jackknife = cfg.variance == "jackknife"
     blocks = cfg.jackknife_blocks if jackknife else 1
@@ -98,13 +93,13 @@ def rozyn_fit(y: np.ndarray, fs_hz: float, v: AnyVehicle, cfg: PipelineConfig, s
     records = [total] + ([total - sums[b] for b in range(blocks)] if jackknife else [])  # b: without block b
     decays = np.stack([free_decays(r, first, cfg) for r in records])
     identified = IDENTIFIERS[cfg.identifier](decays, dt, p_blocks)
-    params, body = fitted(identified[0])
+    params, body = _fitted(identified[0], v, cfg, sensors)
     if not jackknife:
         return params, None, body, ()
     replicates = np.full((blocks, params.size), np.nan)
     for b, found in enumerate(identified[1:]):
         with contextlib.suppress(IdentificationError, np.linalg.LinAlgError):  # a failed one: NaN
-            replicates[b] = fitted(found, near=body)[0]
+            replicates[b] = _fitted(found, v, cfg, sensors, near=body)[0]
     cov, good = jackknife_covariance(replicates, params)
     if cov is None:
         raise IdentificationError(
@@ -117,10 +112,9 @@ def fit_correlations(corr: np.ndarray, first: int, fs_hz: float, v: AnyVehicle, 
                      sensors: tuple[int, ...] | None = None) -> tuple[np.ndarray, tuple[Mode, ...]]:
     """(the body parameters, the body modes) from (lags, k, k) correlation sums from lag
     ``first`` on, as :func:`rozyn_fit` fits a window's (no jackknife)."""
-    (n_modes, kind), decays = _body(cfg, v), free_decays(corr, first, cfg)[None]
-    modes = IDENTIFIERS[cfg.identifier](decays, 1.0 / fs_hz, _p_blocks(cfg, v, corr.shape[1]))[0]
-    body = select_body_modes(modes, cfg.freq_band_hz, cfg.damping_band, n_modes=n_modes)
-    return fit_inertia(v, body, cfg.stiffness_model, kind, sensors), tuple(body)
+    decays = free_decays(corr, first, cfg)[None]
+    return _fitted(IDENTIFIERS[cfg.identifier](decays, 1.0 / fs_hz, _p_blocks(cfg, v, corr.shape[1]))[0],
+                   v, cfg, sensors)
 
 
 def _p_blocks(cfg: PipelineConfig, v: AnyVehicle, channels: int) -> int:
@@ -129,10 +123,14 @@ def _p_blocks(cfg: PipelineConfig, v: AnyVehicle, channels: int) -> int:
     return math.ceil(cfg.gamma * 2 * (max(cfg.n_dof, N_DOF_FULL) if rolls(v) else cfg.n_dof) / channels)
 
 
-def _body(cfg: PipelineConfig, v: AnyVehicle) -> tuple[int, str]:
-    """(how many body modes, the fit's kind): the half car's two and ``cfg.fit`` (the thesis'
-    stiffness-block fit is the half car's), the full car's three and ``modal``."""
-    return (3, "modal") if rolls(v) else (2, cfg.fit)
+def _fitted(modes: list[Mode], v: AnyVehicle, cfg: PipelineConfig, sensors: tuple[int, ...] | None,
+            near: tuple[Mode, ...] | None = None) -> tuple[np.ndarray, tuple[Mode, ...]]:
+    """(the body parameters, the body modes) from identified ``modes``: the half car's two and
+    ``cfg.fit`` (the thesis' stiffness-block fit is the half car's), the full car's three and
+    the modal fit; with ``near``, the modes closest to those (a jackknife replicate)."""
+    n_modes, kind = (3, "modal") if rolls(v) else (2, cfg.fit)
+    body = select_body_modes(modes, cfg.freq_band_hz, cfg.damping_band, n_modes=n_modes, near=near)
+    return fit_inertia(v, body, cfg.stiffness_model, kind, sensors), tuple(body)
 
 
 def free_decays(corr: np.ndarray, first: int, cfg: PipelineConfig) -> np.ndarray:

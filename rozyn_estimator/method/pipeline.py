@@ -29,7 +29,7 @@ import numpy as np
 from rozyn_estimator.method.budget import Budget, Calibration, rozyn_contributions
 from rozyn_estimator.method.config import PARAM_NAMES, PipelineConfig
 from rozyn_estimator.method.drive import constant_speed_only, varying_drive, window_speed
-from rozyn_estimator.method.fit import axle_shapes, characteristic_matrix
+from rozyn_estimator.method.fit import characteristic_matrix, corner_shapes
 from rozyn_estimator.method.full.refine import refine
 from rozyn_estimator.method.full.result import Refinement
 from rozyn_estimator.method.glitches import InputError, checked_window
@@ -264,7 +264,7 @@ def _done(
     poles = np.array([md.eigenvalue for md in modes])
     return Estimate(
         status="ok", params=params, covariance=cov, modes=modes,
-        a0=characteristic_matrix(poles, axle_shapes(v, modes)), n_samples=n,
+        a0=characteristic_matrix(poles, corner_shapes(v, modes)), n_samples=n,
         elapsed_ms=(time.perf_counter() - started) * 1e3, notes=notes,
     )
 
