@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.method.config import FULL_PARAM_NAMES
-from rozyn_estimator.method.full.stage import FullEstimate
+from rozyn_estimator.method.pipeline import Estimate
 from rozyn_estimator.tools.cars import FULL
 from rozyn_estimator.tools.cli import main
 from rozyn_estimator.tools.compare.compare import bar_failures, compare
@@ -22,8 +22,8 @@ TRUTH = np.array([1000.0, 400.0, 2000.0, 1.2, 0.0])
 
 
 def _result(params: list[float], std: list[float]) -> TrialResult:
-    est = FullEstimate(status="ok", params=np.array(params), covariance=np.diag(np.square(std)),
-                       elapsed_ms=5.0)
+    est = Estimate(status="ok", params=np.array(params), covariance=np.diag(np.square(std)),
+                   names=FULL_PARAM_NAMES, elapsed_ms=5.0)
     return TrialResult(1, est, TRUTH, 0.0, "full")
 
 
@@ -32,9 +32,10 @@ def _cases(name: str, preset: str = "table5-1") -> list:
 
 
 def test_the_summary_counts_bias_coverage_and_failures():
+    failed = Estimate(status="failed", reason="no modes", names=FULL_PARAM_NAMES)
     results = [_result([1010.0, 400.0, 2000.0, 1.2, 0.004], [10.0, 1.0, 1.0, 0.01, 0.001]),
                _result([1000.0, 410.0, 2000.0, 1.2, 0.002], [10.0, 1.0, 1.0, 0.01, 0.001]),
-               TrialResult(3, FullEstimate(status="failed", reason="no modes"), TRUTH, 0.0, "full")]
+               TrialResult(3, failed, TRUTH, 0.0, "full")]
     s = summarise(results)
     assert s.n == 3 and s.failures == 1
     assert s.bias_pct[0] == pytest.approx(0.5) and s.bias_pct[1] == pytest.approx(1.25)

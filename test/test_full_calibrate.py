@@ -1,6 +1,6 @@
-"""The full car's sensors calibrated by the data (method/full/uncertainty/calibrate.py, sensing.py): the
-model's derivatives by the sensors' values, the copy that calibrates, and what it is for —
-an uncertainty that is neither 10x too large on quiet data nor too small when a gain is off."""
+"""The full car's sensors calibrated by the data (method/full/uncertainty/calibrate.py,
+sensing.py): the model's derivatives by the sensors' values, the copy that calibrates, and what
+it is for — an uncertainty neither 10x too large on quiet data nor too small when a gain is off."""
 
 from __future__ import annotations
 
@@ -12,11 +12,10 @@ import pytest
 from rozyn_estimator.method.budget import Calibration
 from rozyn_estimator.method.full import refine
 from rozyn_estimator.method.full.spectrum import VehicleSpectrum
-from rozyn_estimator.method.full.stage import FullEstimate, estimate_full
 from rozyn_estimator.method.full.uncertainty import calibrate
 from rozyn_estimator.method.full.uncertainty.calibrate import VehicleCalibration, sensor_groups
 from rozyn_estimator.method.full.uncertainty.corners import CornerCalibrating, corner_keys
-from rozyn_estimator.method.pipeline import PipelineConfig
+from rozyn_estimator.method.pipeline import Estimate, PipelineConfig, estimate
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
@@ -80,8 +79,8 @@ def quiet_drive() -> np.ndarray:
     return Simulation(sim).run(120.0).accel_mps2
 
 
-def _fit(y: np.ndarray, cfg: PipelineConfig) -> tuple[np.ndarray, np.ndarray, FullEstimate]:
-    e = estimate_full(y, 100.0, CAR, cfg, 100 / 3.6)
+def _fit(y: np.ndarray, cfg: PipelineConfig) -> tuple[np.ndarray, np.ndarray, Estimate]:
+    e = estimate(y, 100.0, CAR, cfg, 100 / 3.6)
     assert e.ok and e.covariance is not None and e.params is not None and e.budget is not None
     return e.params - TRUTH, np.sqrt(np.diag(e.covariance)), e
 
@@ -125,17 +124,17 @@ def test_a_sensors_gain_off_by_its_tolerance_is_calibrated(quiet_drive: np.ndarr
 
 
 def test_a_warm_update_takes_the_calibration_over_and_refreshes_it(quiet_drive: np.ndarray) -> None:
-    first = estimate_full(quiet_drive[:-500], 100.0, CAR, CALIBRATING, 100 / 3.6)
+    first = estimate(quiet_drive[:-500], 100.0, CAR, CALIBRATING, 100 / 3.6)
     calibration = first.refinement.calibration
     assert calibration is not None and calibration.age == 0
-    nxt = estimate_full(quiet_drive[500:], 100.0, CAR, CALIBRATING, 100 / 3.6, warm=first)
+    nxt = estimate(quiet_drive[500:], 100.0, CAR, CALIBRATING, 100 / 3.6, warm_start=first)
     taken = nxt.refinement.calibration
     assert taken is not None and taken.age == 1 and np.array_equal(taken.values, calibration.values)
     assert np.allclose(nxt.params[:4], first.params[:4], rtol=0.02)
     assert abs(nxt.params[4] - first.params[4]) < 1e-3
     old = dataclasses.replace(first, refinement=dataclasses.replace(
         first.refinement, calibration=dataclasses.replace(calibration, age=10)))
-    fresh = estimate_full(quiet_drive[500:], 100.0, CAR, CALIBRATING, 100 / 3.6, warm=old)
+    fresh = estimate(quiet_drive[500:], 100.0, CAR, CALIBRATING, 100 / 3.6, warm_start=old)
     assert fresh.refinement.calibration is not None and fresh.refinement.calibration.age == 0
 
 
@@ -217,11 +216,11 @@ def test_a_cold_fit_handed_over_to_the_calibration_ends_at_the_posteriors_mode(
     sim = SimConfig(model="full", full_vehicle=plant, road=RoadSpec(amplitudes="gaussian"), seed=seed,
                     speed_kmh=speed_kmh, noise_std_mps2=0.05)
     y = Simulation(sim).run(120.0).accel_mps2
-    quick = estimate_full(y, 100.0, CAR, CALIBRATING, speed_kmh / 3.6)
+    quick = estimate(y, 100.0, CAR, CALIBRATING, speed_kmh / 3.6)
     monkeypatch.setattr(refine, "HANDOFF", 0.0)  # the fit to its own tolerance
     monkeypatch.setattr(calibrate, "_SECOND_STEP", 0.0)  # the posterior scored ...
     monkeypatch.setattr(calibrate, "_CONVERGED", 1e-8)  # ... to its mode
-    mode = estimate_full(y, 100.0, CAR, CALIBRATING, speed_kmh / 3.6)
+    mode = estimate(y, 100.0, CAR, CALIBRATING, speed_kmh / 3.6)
     assert quick.stage == mode.stage == "likelihood"
     assert quick.params is not None and mode.params is not None and mode.covariance is not None
     off = (quick.params - mode.params) / np.sqrt(np.diag(mode.covariance))

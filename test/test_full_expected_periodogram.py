@@ -14,8 +14,8 @@ from rozyn_estimator.method import METHODS
 from rozyn_estimator.method.full.grid import averaging_matrix, expected_periodogram_m2
 from rozyn_estimator.method.full.refine import refine
 from rozyn_estimator.method.full.spectrum import VehicleSpectrum
-from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
+from rozyn_estimator.method.pipeline import estimate
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation
@@ -81,7 +81,7 @@ def _roll_error_pct(seed: int, noise: float) -> float:
                     duration_s=120.0, seed=seed)
     y = Simulation(sim).run(120.0).accel_mps2
     y = y + np.random.default_rng([seed, 4]).standard_normal(y.shape) * noise * y.std(axis=0)
-    start = estimate_full(y, 100.0, EXACT, METHODS["rozyn"], 100 / 3.6).params
+    start = estimate(y, 100.0, EXACT, METHODS["rozyn"], 100 / 3.6).params
     ref = refine(y, 100.0, EXACT, (0, 1, 2, 3), start, 100 / 3.6, LikelihoodConfig())
     assert ref.ok, ref.reason
     return 100.0 * (ref.params[1] / EXACT.roll_inertia_kgm2 - 1.0)

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from rozyn_estimator.method.full.stage import FullEstimate
 from rozyn_estimator.method.likelihood.fitcheck import ALPHA
+from rozyn_estimator.method.pipeline import Estimate
 from rozyn_estimator.online.records import WARN, Update, layout_of, update_values
 from rozyn_estimator.tools.cars import FULL
 from rozyn_estimator.tools.compare.suites import suite
@@ -18,7 +18,7 @@ from sim_node.departures import Departures
 BASE = suite("acceptance", TrialSpec(vehicle=FULL.presets["table5-1"]))[3].spec
 
 
-def _estimates(spec: TrialSpec, seeds: range) -> list[FullEstimate]:
+def _estimates(spec: TrialSpec, seeds: range) -> list[Estimate]:
     out = [run_trial(spec, seed).estimate for seed in seeds]
     assert all(e.ok for e in out)
     return out

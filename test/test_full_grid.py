@@ -22,9 +22,9 @@ from rozyn_estimator.method.full.corner_matrices import (
 )
 from rozyn_estimator.method.full.grid import ALIAS_SPACING_HZ, alias_map
 from rozyn_estimator.method.full.spectrum import VehicleSpectrum
-from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.full.uncertainty import refine_budget
 from rozyn_estimator.method.full.whittle import WhittleObjective
+from rozyn_estimator.method.pipeline import estimate
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation
@@ -51,8 +51,8 @@ def test_the_grid_leaves_the_estimate_and_its_covariance(seed, speed_kmh):
     """Against S at every frequency (and the exact Hessian, no coarse first fit): the
     estimates within 0.05 of their std (the fit's tolerance), the std within 0.5 %."""
     y, v = _window(seed, speed_kmh)
-    quick = estimate_full(y, 100.0, FullVehicle(), PipelineConfig(), v)
-    exact = estimate_full(y, 100.0, FullVehicle(), _every_frequency(PipelineConfig()), v)
+    quick = estimate(y, 100.0, FullVehicle(), PipelineConfig(), v)
+    exact = estimate(y, 100.0, FullVehicle(), _every_frequency(PipelineConfig()), v)
     assert quick.stage == exact.stage == "likelihood"
     assert quick.refinement is not None and exact.refinement is not None
     std = np.sqrt(np.diag(exact.refinement.covariance))
@@ -146,10 +146,10 @@ def test_the_analytic_contributions_are_the_differences(monkeypatch):
     those by moving the vehicle a small step (the geometry's are differences either way)."""
     y, v = _window(6)
     vehicle = BARS  # its bars carry their default tolerances
-    analytic = estimate_full(y, 100.0, vehicle, PipelineConfig(), v).refinement
+    analytic = estimate(y, 100.0, vehicle, PipelineConfig(), v).refinement
     monkeypatch.setattr(refine_budget, "_corner_direction", lambda *_: None)
     monkeypatch.setattr(refine_budget, "_sensor_change", lambda *_: None)
-    stepped = estimate_full(y, 100.0, vehicle, PipelineConfig(), v).refinement
+    stepped = estimate(y, 100.0, vehicle, PipelineConfig(), v).refinement
     assert analytic is not None and stepped is not None
     assert {"anti_roll_stiffness_front_nmprad", "sensor_time_offset_s", "sensor_gain_rear[rear_left]",
             "sensor_lateral_m[front_right]"} <= analytic.contributions.keys()
@@ -163,9 +163,9 @@ def test_the_budget_summed_over_every_third_frequency_is_the_whole_sum(monkeypat
     frequency, each for its neighbours) within 3 % of the sum over every frequency (of each
     parameter's largest contribution), the budget's total within 1 %."""
     y, v = _window(1)
-    sampled = estimate_full(y, 100.0, FullVehicle(), PipelineConfig(), v).refinement
+    sampled = estimate(y, 100.0, FullVehicle(), PipelineConfig(), v).refinement
     monkeypatch.setattr(whittle, "_HESSIAN_STEP", 1)
-    whole = estimate_full(y, 100.0, FullVehicle(), PipelineConfig(), v).refinement
+    whole = estimate(y, 100.0, FullVehicle(), PipelineConfig(), v).refinement
     assert sampled is not None and whole is not None
     assert sampled.contributions.keys() == whole.contributions.keys()
     a, b = np.array(list(sampled.contributions.values())), np.array(list(whole.contributions.values()))
@@ -191,8 +191,8 @@ def test_nearly_noise_free_data_are_fitted_at_every_frequency():
     """Noise floors near zero: the fit continues with S at every frequency (the grid's small
     errors matter where S is nearly singular), and its warm successor starts there."""
     y, v = _window(7, noise=0.0)
-    est = estimate_full(y, 100.0, EXACT, PipelineConfig(), v)
-    exact = estimate_full(y, 100.0, EXACT, _every_frequency(PipelineConfig()), v)
+    est = estimate(y, 100.0, EXACT, PipelineConfig(), v)
+    exact = estimate(y, 100.0, EXACT, _every_frequency(PipelineConfig()), v)
     assert est.refinement is not None and exact.refinement is not None
     std = np.sqrt(np.diag(exact.refinement.covariance))
     assert np.all(np.abs(est.refinement.params - exact.refinement.params) < 0.05 * std)

@@ -12,7 +12,7 @@ from scipy import signal
 from rozyn_estimator.method import METHODS
 from rozyn_estimator.method.full import intermittency, refine
 from rozyn_estimator.method.full.intermittency import road_intermittency, road_itself
-from rozyn_estimator.method.full.stage import estimate_full
+from rozyn_estimator.method.pipeline import estimate
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation
@@ -58,7 +58,7 @@ def _run(kind: str, seed: int, duration_s: float = 120.0) -> tuple[np.ndarray, r
                     speed_kmh=100.0, seed=seed)
     y = Simulation(sim).run(duration_s).accel_mps2
     y = y + np.random.default_rng([seed, 4]).standard_normal(y.shape) * 0.1 * y.std(axis=0)
-    start = estimate_full(y, 100.0, EXACT, METHODS["rozyn"], 100 / 3.6).params
+    start = estimate(y, 100.0, EXACT, METHODS["rozyn"], 100 / 3.6).params
     ref = refine.refine(y, 100.0, EXACT, (0, 1, 2, 3), start, 100 / 3.6)
     assert ref.ok, ref.reason
     return y, ref

@@ -14,7 +14,7 @@ from spectrum_helpers import assert_slopes, model_response, plant_response
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.method.full.refine import refine
 from rozyn_estimator.method.full.spectrum import VehicleSpectrum
-from rozyn_estimator.method.full.stage import estimate_full
+from rozyn_estimator.method.pipeline import estimate
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation
@@ -61,8 +61,8 @@ def test_the_derivatives_are_the_models_slopes():
 
 def test_the_refinement_is_far_sharper_than_rozyns_and_its_std_is_true():
     y = _run(EXACT, seed=5)
-    est = estimate_full(y, 100.0, EXACT, PipelineConfig(), SPEED_MPS)
-    rozyn = estimate_full(y, 100.0, EXACT, PipelineConfig(refine="none"), SPEED_MPS)
+    est = estimate(y, 100.0, EXACT, PipelineConfig(), SPEED_MPS)
+    rozyn = estimate(y, 100.0, EXACT, PipelineConfig(refine="none"), SPEED_MPS)
     assert est.ok and est.stage == "likelihood", est.reason
     assert est.std is not None and rozyn.std is not None
     z = (est.params - _truth(EXACT)) / est.std
@@ -76,8 +76,8 @@ def test_the_refinement_is_far_sharper_than_rozyns_and_its_std_is_true():
 
 def test_a_warm_start_on_the_same_window_needs_no_iteration():
     y = _run(EXACT, seed=6)
-    cold = estimate_full(y, 100.0, EXACT, PipelineConfig(), SPEED_MPS)
-    warm = estimate_full(y, 100.0, EXACT, PipelineConfig(), SPEED_MPS, warm=cold)
+    cold = estimate(y, 100.0, EXACT, PipelineConfig(), SPEED_MPS)
+    warm = estimate(y, 100.0, EXACT, PipelineConfig(), SPEED_MPS, warm_start=cold)
     assert cold.refinement is not None and warm.refinement is not None
     assert warm.refinement.iterations == 0 and cold.refinement.iterations > 0
     assert warm.params == pytest.approx(cold.params)
@@ -86,7 +86,7 @@ def test_a_warm_start_on_the_same_window_needs_no_iteration():
 def test_three_sensors_and_an_asymmetric_car():
     plant = dataclasses.replace(ASYMMETRIC, tolerances=FullTolerances.none())
     y = _run(plant, seed=7)[:, [0, 1, 3]]
-    est = estimate_full(y, 100.0, plant, PipelineConfig(), SPEED_MPS,
+    est = estimate(y, 100.0, plant, PipelineConfig(), SPEED_MPS,
                         sensors=("front_left", "front_right", "rear_right"))
     assert est.ok and est.stage == "likelihood", est.reason
     assert est.std is not None
@@ -104,8 +104,8 @@ def test_the_budget_predicts_what_a_wrong_assumed_value_does():
     y = _run(plant, seed=8)
     cfg = PipelineConfig()
     cfg = dataclasses.replace(cfg, likelihood=dataclasses.replace(cfg.likelihood, self_calibrate=False))
-    wrong = estimate_full(y, 100.0, assumed, cfg, SPEED_MPS)
-    right = estimate_full(y, 100.0, plant, cfg, SPEED_MPS)
+    wrong = estimate(y, 100.0, assumed, cfg, SPEED_MPS)
+    right = estimate(y, 100.0, plant, cfg, SPEED_MPS)
     assert wrong.refinement is not None and wrong.budget is not None
     contribution = wrong.refinement.contributions["suspension_stiffness_front_npm"]
     shift = wrong.params - right.params
@@ -116,10 +116,10 @@ def test_the_budget_predicts_what_a_wrong_assumed_value_does():
 
 def test_without_a_speed_rozyns_estimate_is_published_with_a_note():
     y = _run(EXACT, seed=5, duration_s=60.0)
-    est = estimate_full(y, 100.0, EXACT, PipelineConfig(), None)
+    est = estimate(y, 100.0, EXACT, PipelineConfig(), None)
     assert est.ok and est.stage == "rozyn"
     assert est.refinement is not None and not est.refinement.ok
-    assert "positive speed" in est.notes[0] and "publishing the Rozyn estimate" in est.notes[0]
+    assert "speed is unknown" in est.notes[0] and "publishing the Rozyn estimate" in est.notes[0]
 
 
 def test_a_channel_that_is_only_noise_is_refused():
@@ -136,7 +136,7 @@ def test_a_channel_that_is_only_noise_is_refused():
     (np.ones((20_000, 3)), r"shape \(n, 4\)"),
 ])
 def test_bad_input_is_a_failed_status_with_a_reason(accel, match):
-    est = estimate_full(accel, 100.0, FullVehicle(), PipelineConfig(), 27.0)
+    est = estimate(accel, 100.0, FullVehicle(), PipelineConfig(), 27.0)
     assert est.status == "failed" and est.params is None
     assert re.search(match, est.reason), est.reason
 
@@ -148,8 +148,8 @@ def test_the_budgets_shortcut_keeps_the_contributions():
     y = _run(FullVehicle(), seed=5)
     cfg = PipelineConfig()
     every = dataclasses.replace(cfg, likelihood=dataclasses.replace(cfg.likelihood, grid_hz=0.0))
-    quick = estimate_full(y, 100.0, FullVehicle(), cfg, SPEED_MPS).refinement
-    full = estimate_full(y, 100.0, FullVehicle(), every, SPEED_MPS).refinement
+    quick = estimate(y, 100.0, FullVehicle(), cfg, SPEED_MPS).refinement
+    full = estimate(y, 100.0, FullVehicle(), every, SPEED_MPS).refinement
     assert quick is not None and full is not None and quick.contributions.keys() == full.contributions.keys()
     a, b = np.array(list(quick.contributions.values())), np.array(list(full.contributions.values()))
     assert np.all(np.abs(a - b) <= 0.03 * np.abs(b).max(axis=0)), np.abs(a - b) / np.abs(b).max(axis=0)

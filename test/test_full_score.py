@@ -15,7 +15,7 @@ import rozyn_estimator.method.full.refine as refine_module
 import rozyn_estimator.method.full.score as score_module
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.method.full.score import score_covariance
-from rozyn_estimator.method.full.stage import estimate_full
+from rozyn_estimator.method.pipeline import estimate
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation
@@ -44,7 +44,7 @@ def _fit(seed: int, speed_kmh: float, taper: float = 0.2) -> tuple:
 
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(refine_module, "sandwich_ratio", capture)
-        est = estimate_full(_window(seed, speed_kmh), 100.0, EXACT, cfg, speed_kmh / 3.6)
+        est = estimate(_window(seed, speed_kmh), 100.0, EXACT, cfg, speed_kmh / 3.6)
     assert est.stage == "likelihood"
     return seen["args"]
 
@@ -105,9 +105,9 @@ def test_the_midpoint_rule_is_the_sum_over_every_pair_of_bins(fitted):
 
 def test_a_warm_update_keeps_the_ratio_only_on_a_window_as_long():
     y = _window(3, 100.0)
-    cold = estimate_full(y, 100.0, EXACT, PipelineConfig(), 100 / 3.6)
-    same = estimate_full(y, 100.0, EXACT, PipelineConfig(), 100 / 3.6, warm=cold)
-    shorter = estimate_full(y[:-1000], 100.0, EXACT, PipelineConfig(), 100 / 3.6, warm=cold)
+    cold = estimate(y, 100.0, EXACT, PipelineConfig(), 100 / 3.6)
+    same = estimate(y, 100.0, EXACT, PipelineConfig(), 100 / 3.6, warm_start=cold)
+    shorter = estimate(y[:-1000], 100.0, EXACT, PipelineConfig(), 100 / 3.6, warm_start=cold)
     assert cold.refinement is not None and same.refinement is not None and shorter.refinement is not None
     assert cold.refinement.sandwich is not None and shorter.refinement.sandwich is not None
     assert same.refinement.sandwich is cold.refinement.sandwich

@@ -12,12 +12,12 @@ from rozyn_estimator.body_model import heave_index
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.method.config import FULL_PARAM_NAMES
 from rozyn_estimator.method.fit import corner_stiffness, fit_inertia, plane_map
-from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.identification import (
     IdentificationError,
     select_body_modes,
     state_transition_modes,
 )
+from rozyn_estimator.method.pipeline import estimate
 from rozyn_estimator.vehicle_full import FullVehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation
@@ -108,7 +108,7 @@ def test_road_driven_windows_give_estimates_with_their_jackknife_covariance():
     sim = Simulation(SimConfig(model="full", full_vehicle=v, road=RoadSpec(amplitudes="gaussian"), seed=3,
                                noise_std_mps2=0.05))
     y = sim.run(120.0).accel_mps2
-    est = estimate_full(y, 100.0, v, PipelineConfig(refine="none"), 100 / 3.6)
+    est = estimate(y, 100.0, v, PipelineConfig(refine="none"), 100 / 3.6)
     assert est.ok, est.reason
     assert est.covariance is not None and est.covariance.shape == (5, 5)
     assert np.all(np.linalg.eigvalsh(est.covariance) > 0)
@@ -124,7 +124,7 @@ def test_three_sensors_suffice():
     v = FullVehicle()
     sim = Simulation(SimConfig(model="full", full_vehicle=v, road=RoadSpec(amplitudes="gaussian"), seed=4))
     y = sim.run(120.0).accel_mps2
-    est = estimate_full(y[:, [0, 1, 3]], 100.0, v, PipelineConfig(refine="none"), 100 / 3.6,
+    est = estimate(y[:, [0, 1, 3]], 100.0, v, PipelineConfig(refine="none"), 100 / 3.6,
                         sensors=("front_left", "front_right", "rear_right"))
     assert est.ok, est.reason
     assert np.abs(_error(est.params, v)[:4]).max() < 0.3
@@ -140,7 +140,7 @@ def test_three_sensors_suffice():
     (np.ones((20_000, 4)), ("front_left", "front_right", "rear_left", "rear_right"), "constant"),
 ])
 def test_bad_input_is_a_failed_status_with_a_reason(accel, sensors, match):
-    est = estimate_full(accel, 100.0, FullVehicle(), PipelineConfig(refine="none"), 27.0, sensors=sensors)
+    est = estimate(accel, 100.0, FullVehicle(), PipelineConfig(refine="none"), 27.0, sensors=sensors)
     assert est.status == "failed" and est.params is None
     assert re.search(match, est.reason), est.reason
 
@@ -165,7 +165,7 @@ def test_the_budget_adds_each_tolerance_as_its_effect_on_the_fit():
 
     v = FullVehicle(cog_lateral_m=0.05, anti_roll_stiffness_front_nmprad=5000.0)
     y = _driven(v)
-    est = estimate_full(y, 100.0, v, PipelineConfig(refine="none"), 100 / 3.6)
+    est = estimate(y, 100.0, v, PipelineConfig(refine="none"), 100 / 3.6)
     assert est.ok and est.budget is not None
     assert est.covariance == pytest.approx(est.budget.statistical + est.budget.systematic)
     labels = {name for i in range(5) for name, _ in est.budget.by_group(i)}
@@ -179,7 +179,7 @@ def test_the_budget_adds_each_tolerance_as_its_effect_on_the_fit():
     assert abs(track[1]) / v.roll_inertia_kgm2 > 10 * abs(track[2]) / v.pitch_inertia_kgm2
     # without tolerances: the jackknife alone
     exact = v.replace(tolerances=FullTolerances(**{k: 0.0 for k in FullTolerances().to_dict()}))
-    alone = estimate_full(y, 100.0, exact, PipelineConfig(refine="none"), 100 / 3.6)
+    alone = estimate(y, 100.0, exact, PipelineConfig(refine="none"), 100 / 3.6)
     assert alone.budget is None
     assert alone.covariance == pytest.approx(est.budget.statistical)
     assert np.all(np.diag(est.covariance) > np.diag(alone.covariance))

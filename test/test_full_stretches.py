@@ -10,10 +10,10 @@ import pytest
 
 from rozyn_estimator.method import METHODS
 from rozyn_estimator.method.full import intermittency, refine, stretches
-from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.full.stretches import drive_stretches
 from rozyn_estimator.method.likelihood.road_input import DRIVING_MPS
 from rozyn_estimator.method.likelihood.spectra import taper_window
+from rozyn_estimator.method.pipeline import estimate
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation
@@ -39,7 +39,7 @@ def test_a_steady_speed_has_no_stretches_and_a_stop_belongs_to_none():
 
 
 def _refined(speed: np.ndarray | float, y: np.ndarray) -> refine.Refinement:
-    start = estimate_full(y, FS, EXACT, METHODS["rozyn"], 20.0).params
+    start = estimate(y, FS, EXACT, METHODS["rozyn"], 20.0).params
     ref = refine.refine(y, FS, EXACT, (0, 1, 2, 3), start, speed)
     assert ref.ok, ref.reason
     return ref

@@ -90,17 +90,17 @@ def test_gating_leaves_the_input_untouched():
 
 def test_the_full_car_gates_and_reports_a_glitch_per_corner():
     """Its estimate counts what the window's check gated, per channel, and /diagnostics says it."""
-    from rozyn_estimator.method.full.stage import estimate_full
+    from rozyn_estimator.method.pipeline import estimate
     from rozyn_estimator.online.records import layout_of
     from rozyn_estimator.vehicle_full import FullVehicle
 
     sim = SimConfig(model="full", duration_s=60.0, seed=4, noise_std_mps2=0.05)
     accel = Simulation(sim).run(60.0).accel_mps2
     cfg = PipelineConfig()
-    reference = estimate_full(accel, FS, FullVehicle(), cfg, SPEED)
+    reference = estimate(accel, FS, FullVehicle(), cfg, SPEED)
     glitched = accel.copy()
     glitched[700, 2] = 1e6
-    est = estimate_full(glitched, FS, FullVehicle(), cfg, SPEED)
+    est = estimate(glitched, FS, FullVehicle(), cfg, SPEED)
     assert reference.ok and reference.glitches == (0, 0, 0, 0)
     assert est.ok and est.glitches == (0, 0, 1, 0)
     assert est.stage == "likelihood" and np.all(np.abs(est.params - reference.params) < 0.2 * reference.std)

@@ -11,6 +11,7 @@ from planar_multibody import simulate as integrate
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.gravity import STANDARD_GRAVITY_MPS2 as G
+from rozyn_estimator.method import estimate
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.tools.trial.run import estimate_block, simulate
 from rozyn_estimator.tools.trial.spec import TrialSpec
@@ -117,8 +118,8 @@ def test_the_refinement_told_the_heights_is_unbiased_and_told_nothing_reads_iyy_
     for seed in (1, 2, 3):
         block = simulate(spec, seed)
         exact = estimate_block(spec, block)
-        blind = spec.car.run_estimator(block.accel_mps2, spec.rate_hz, told_nothing, spec.pipeline_config(),
-                                       block.speed_mps, tuple(block.channels), None)
+        blind = estimate(block.accel_mps2, spec.rate_hz, told_nothing, spec.pipeline_config(),
+                         block.speed_mps, sensors=tuple(block.channels))
         assert exact.ok and blind.ok
         k = spec.car.names.index("pitch_inertia_kgm2")
         assert abs(exact.params[k] / iyy - 1) < 0.006, (seed, exact.params)

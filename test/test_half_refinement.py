@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.method import METHODS, PipelineConfig, estimate
+from rozyn_estimator.method import METHODS, PARAM_NAMES, PipelineConfig, estimate
 from rozyn_estimator.method.full.refine import refine as refine_vehicle
 from rozyn_estimator.method.likelihood import LikelihoodConfig
 from rozyn_estimator.method.likelihood.road_input import delay_characteristic
@@ -124,6 +124,18 @@ def test_pipeline_refines_and_keeps_rozyns_estimate(window):
     assert record["stage"] == "likelihood" and record["rozyn"]["mass_kg"] == pytest.approx(rozyn.params[0])
     assert record["refinement"]["status"] == "ok"
 
+
+
+def test_the_budget_says_what_varies_between_windows_as_the_full_cars_does(window):
+    """The data calibrate the sensors afresh in each window: that part of the tolerances' moves the
+    estimate from window to window (a stop's load-change test counts it), on the half car too."""
+    accel, speed = window
+    est = estimate(accel, 100.0, Vehicle(), PipelineConfig(), speed_mps=speed)
+    assert est.ok and est.budget is not None and est.budget.varying
+    assert set(est.budget.varying) <= set(est.budget.contributions)
+    between = np.diag(est.budget.between_windows)
+    assert np.all(between > np.diag(est.budget.statistical)) and np.all(between <= np.diag(est.covariance))
+    assert est.budget.names == est.names == PARAM_NAMES
 
 def test_pipeline_falls_back_to_rozyn_with_a_warning(window):
     accel, _ = window

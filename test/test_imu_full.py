@@ -13,8 +13,8 @@ from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.method.config import FULL_PARAM_NAMES
 from rozyn_estimator.method.full.spectrum import VehicleSpectrum
-from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.imu import gyro_sign_problem, stage_input
+from rozyn_estimator.method.pipeline import estimate
 from rozyn_estimator.online import EstimatorConfig
 from rozyn_estimator.online.records import OK, Update, layout_of, update_values
 from rozyn_estimator.sensors import sensors_from_mapping
@@ -148,7 +148,7 @@ def test_one_imu_estimates_the_full_car_as_four_accelerometers_do():
     for name, v in (("imu", imu_car()), ("corners", FullVehicle(tolerances=EXACT))):
         sim = SimConfig(model="full", full_vehicle=v, seed=3, duration_s=120, speed_kmh=100)
         y = noisy(Simulation(sim).run(120).accel_mps2, 0.1, 3)
-        got[name] = e = estimate_full(y, 100.0, v, PipelineConfig(), speed_mps=SPEED_MPS)
+        got[name] = e = estimate(y, 100.0, v, PipelineConfig(), speed_mps=SPEED_MPS)
         assert e.ok and e.stage == "likelihood", e.reason
         assert np.all(np.abs(e.params - truth) < 4 * e.std), (name, e.params, e.std)
         assert not [n for n in e.notes if "model check" in n], e.notes
@@ -180,7 +180,7 @@ def test_a_gyro_with_the_wrong_sign_is_named_not_fitted():
     for column, says in ((2, "imu.gyro_y reads the pitch rate"), (1, "imu.gyro_x reads the roll rate")):
         flip = np.ones(3)
         flip[column] = -1.0
-        e = estimate_full(y * flip, 100.0, v, PipelineConfig(), speed_mps=30 / 3.6)
+        e = estimate(y * flip, 100.0, v, PipelineConfig(), speed_mps=30 / 3.6)
         assert not e.ok and says in e.reason and "REP 103" in e.reason, e.reason
     told = v.replace(sprung_mass_kg=1200.0, roll_inertia_kgm2=480.0, pitch_inertia_kgm2=1600.0,
                      cog_from_front_axle_m=1.4)
@@ -235,7 +235,7 @@ def test_a_turned_imu_is_calibrated_not_mistaken_for_the_cog():
     sim = SimConfig(model="full", full_vehicle=v, seed=5, duration_s=120,
                     departures=Departures(gyro_yaw_misalignment_rad=np.radians(2.0)))
     y = noisy(Simulation(sim).run(120).accel_mps2, 0.1, 5)
-    e = estimate_full(y, 100.0, v, PipelineConfig(), speed_mps=SPEED_MPS)
+    e = estimate(y, 100.0, v, PipelineConfig(), speed_mps=SPEED_MPS)
     assert e.ok and np.all(np.abs(e.params - truth) < 3 * e.std), (e.params, e.std)
     turn = next(c for c in e.budget.calibration if c.name == "gyro_turn_imu.gyro_y_rad")
     assert abs(np.degrees(turn.estimate) - 2.0) < 3 * np.degrees(turn.std) and turn.identified
@@ -247,6 +247,6 @@ def test_a_turned_imu_is_calibrated_not_mistaken_for_the_cog():
     varying = e.budget.between_windows - e.budget.statistical
     assert 0 < np.trace(varying) <= np.trace(calibrated) * (1 + 1e-9)
     told = imu_car()  # every tolerance 0: the turn is not fitted
-    blind = estimate_full(y, 100.0, told, PipelineConfig(), speed_mps=SPEED_MPS)
+    blind = estimate(y, 100.0, told, PipelineConfig(), speed_mps=SPEED_MPS)
     assert abs(blind.params[4] - truth[4]) > 5 * blind.std[4]
     assert any("model check" in n for n in blind.notes), blind.notes

@@ -6,8 +6,8 @@ import numpy as np
 
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.method.config import FULL_PARAM_NAMES
-from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.information import describe, information_lost
+from rozyn_estimator.method.pipeline import estimate
 from rozyn_estimator.online.records import OK, Update, layout_of, update_values
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.simulation import SimConfig, Simulation
@@ -54,7 +54,7 @@ def test_four_corners_share_what_one_imu_needs_all_of():
     v = FullVehicle(tolerances=exact)
     y = Simulation(SimConfig(model="full", full_vehicle=v, seed=2, duration_s=120)).run(120).accel_mps2
     y = y + 0.1 * y.std(axis=0) * np.random.default_rng(2).standard_normal(y.shape)
-    e = estimate_full(y, 100.0, v, PipelineConfig(), speed_mps=100 / 3.6)
+    e = estimate(y, 100.0, v, PipelineConfig(), speed_mps=100 / 3.6)
     assert e.ok and e.refinement is not None, e.reason
     lost = np.array(e.refinement.information_lost)
     assert lost.shape == (4, 5) and np.all((lost >= 0) & (lost <= 1))

@@ -39,7 +39,7 @@ from rozyn_estimator.bag import open_bag  # noqa: E402
 from rozyn_estimator.errors import ConfigError  # noqa: E402
 from rozyn_estimator.method import PipelineConfig  # noqa: E402
 from rozyn_estimator.method.config import FULL_PARAM_NAMES  # noqa: E402
-from rozyn_estimator.method.full.stage import estimate_full  # noqa: E402
+from rozyn_estimator.method.pipeline import estimate  # noqa: E402
 from rozyn_estimator.online import CUSTOM_DATA_KEY, EstimatorConfig  # noqa: E402
 from rozyn_estimator.ros import messages as ros_io  # noqa: E402
 from rozyn_estimator.ros.estimator_node import EstimatorNode  # noqa: E402
@@ -77,7 +77,7 @@ def _collect(probe):
 @pytest.mark.parametrize("unused", ["", "rear_right"], ids=["four corners", "three corners"])
 def test_sim_and_estimator_of_the_full_car(ros, unused):
     """Sim time at 10x, 50 s of Gaussian ISO A: the full car's inertia and its 5x5 covariance, as
-    estimate_full gives them on the same run's window of the corners the estimator reads."""
+    estimate gives them on the same run's window of the corners the estimator reads."""
     got = _collect(ros.probe)
     sim = ros.add(SimNode(context=ros.context, parameter_overrides=[
         Parameter("vehicle.model", value="full"), Parameter("time_mode", value="sim"),
@@ -103,11 +103,11 @@ def test_sim_and_estimator_of_the_full_car(ros, unused):
     assert (truth.m, truth.ixx, truth.iyy, truth.com.x, truth.com.y) == (1000.0, 400.0, 2000.0, -1.2, 0.0)
     last = next(m for m in got["inertia"] if m.header.stamp.sec == 45)
     i = last.inertia
-    # what estimate_full makes of the same 30 s of the same run's corners
+    # what estimate makes of the same 30 s of the same run's corners
     run = Simulation(sim.config).run(50.0)
     columns = [CORNERS.index(c) for c in corners]
     window = run.accel_mps2[(run.t_s > 15.0 + 1e-9) & (run.t_s <= 45.0 + 1e-9)][:, columns]
-    expected = estimate_full(window, 100.0, FullVehicle(), PipelineConfig(refine="none"), speed_mps=100 / 3.6,
+    expected = estimate(window, 100.0, FullVehicle(), PipelineConfig(refine="none"), speed_mps=100 / 3.6,
                              sensors=corners)
     np.testing.assert_allclose([i.m, i.ixx, i.iyy, -i.com.x, i.com.y], expected.params, rtol=1e-6)
     assert i.ixy == 0.0 and all(math.isnan(x) for x in (i.com.z, i.izz, i.ixz, i.iyz))

@@ -1,6 +1,6 @@
 """The online estimator on the full car's corner accelerometers (no DDS): the same window,
 pairing, reset and schedule logic as the half car's on three or four channels, each update
-run by ``estimate_full`` on the right columns; its configuration as it travels in bags."""
+run by ``estimate`` on the right columns; its configuration as it travels in bags."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import pytest
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.method.config import FULL_PARAM_NAMES
-from rozyn_estimator.method.full.stage import FullEstimate, estimate_full
+from rozyn_estimator.method.pipeline import Estimate, estimate
 from rozyn_estimator.online import (
     ERROR,
     HALF_LAYOUT,
@@ -51,7 +51,7 @@ def _feed(est: OnlineEstimator, accel: np.ndarray, t_ns: np.ndarray) -> list:
     return updates
 
 
-def test_four_corners_update_when_all_are_there_with_estimate_full_on_the_window(block):
+def test_four_corners_update_when_all_are_there_with_estimate_on_the_window(block):
     t = np.arange(block.t_s.size, dtype=np.int64) * NS // 100
     est = OnlineEstimator(FullVehicle(), CONFIG, PIPELINE)
     assert est.layout.channels == CORNERS and est.names == CORNERS and est.layout.full
@@ -59,11 +59,11 @@ def test_four_corners_update_when_all_are_there_with_estimate_full_on_the_window
     assert [u.stamp_ns // NS for u in updates] == [10, 20, 30, 40, 50]
     assert [u.published for u in updates] == [False, False, True, True, True]
     last = updates[-1]
-    assert last.level == OK and isinstance(last.estimate, FullEstimate)
+    assert last.level == OK and isinstance(last.estimate, Estimate)
     assert last.params.shape == (5,) and last.covariance.shape == (5, 5)
-    # the window the update used: the last 30 s of the four columns, estimate_full on them
+    # the window the update used: the last 30 s of the four columns, estimate on them
     window = block.accel_mps2[(t > 20 * NS) & (t <= 50 * NS)]
-    direct = estimate_full(window, 100.0, FullVehicle(), PIPELINE, speed_mps=100 / 3.6)
+    direct = estimate(window, 100.0, FullVehicle(), PIPELINE, speed_mps=100 / 3.6)
     np.testing.assert_allclose(last.params, direct.params, rtol=1e-9)  # BLAS order aside: the same
     np.testing.assert_allclose(last.covariance, direct.covariance, rtol=1e-7)
     values = est.report().values
@@ -75,7 +75,7 @@ def test_four_corners_update_when_all_are_there_with_estimate_full_on_the_window
 
 
 @pytest.mark.parametrize("missing", CORNERS)
-def test_three_corners_run_estimate_full_on_their_own_columns(block, missing):
+def test_three_corners_run_estimate_on_their_own_columns(block, missing):
     """Any three: channel k is the k-th corner named, and the update says which corner each column is."""
     corners = tuple(c for c in CORNERS if c != missing)
     columns = [CORNERS.index(c) for c in corners]
@@ -84,7 +84,7 @@ def test_three_corners_run_estimate_full_on_their_own_columns(block, missing):
     jobs = est.add_batch(np.tile(np.arange(3), t.size), np.repeat(t, 3), block.accel_mps2[:, columns].ravel())
     update = est.compute(jobs[-1][0])
     window = block.accel_mps2[(t > 20 * NS) & (t <= 50 * NS)][:, columns]
-    direct = estimate_full(window, 100.0, FullVehicle(), PIPELINE, speed_mps=100 / 3.6, sensors=corners)
+    direct = estimate(window, 100.0, FullVehicle(), PIPELINE, speed_mps=100 / 3.6, sensors=corners)
     assert update.published and update.estimate.sensors == corners
     np.testing.assert_allclose(update.params, direct.params, rtol=1e-7)  # BLAS order aside: the same
     assert f"samples_{missing}" not in est.report().values
@@ -130,17 +130,18 @@ def test_bad_input_is_dropped_and_counted_per_corner():
 
 def test_a_non_positive_inertia_is_never_published_a_negative_lateral_cog_is(block, monkeypatch):
     t = np.arange(block.t_s.size, dtype=np.int64) * NS // 100
-    real = update_module.estimate_full
+    real = update_module.estimate
 
     def with_params(params):
         def fake(*args, **kwargs):
             est = real(*args, **kwargs)
-            return FullEstimate("ok", params=np.array(params), covariance=est.covariance, modes=est.modes)
+            return Estimate("ok", params=np.array(params), covariance=est.covariance, modes=est.modes,
+                            names=est.names)
         return fake
 
     n = 4000  # 40 s: the update due at 30 s has a full window
     for params, level in (([1000.0, 400.0, 2000.0, 1.2, -0.05], OK), ([1e3, -400.0, 2e3, 1.2, 0.0], ERROR)):
-        monkeypatch.setattr(update_module, "estimate_full", with_params(params))
+        monkeypatch.setattr(update_module, "estimate", with_params(params))
         est = OnlineEstimator(FullVehicle(), CONFIG, PIPELINE)
         jobs = est.add_batch(np.tile(np.arange(4), n), np.repeat(t[:n], 4), block.accel_mps2[:n].ravel())
         update = est.compute(jobs[-1][0])

@@ -11,9 +11,9 @@ import pytest
 
 from rozyn_estimator.method import METHODS
 from rozyn_estimator.method.full.spectrum import VehicleSpectrum
-from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.road_input import driving_speed, spatial_band
+from rozyn_estimator.method.pipeline import estimate
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
@@ -77,7 +77,7 @@ def test_quiet_sensors_at_low_speed_leave_the_roll_inertia_unbiased():
                         seed=seed)
         y = Simulation(sim).run(120.0).accel_mps2
         y = y + np.random.default_rng([seed, 9]).standard_normal(y.shape) * 0.03 * y.std(axis=0)
-        est = estimate_full(y, 100.0, car, METHODS["likelihood"], 30.0 / 3.6)
+        est = estimate(y, 100.0, car, METHODS["likelihood"], 30.0 / 3.6)
         assert est.refinement is not None and est.refinement.ok, est.refinement
         errors.append(est.refinement.params[1] / car.roll_inertia_kgm2 - 1.0)
         stds.append(np.sqrt(est.refinement.covariance[1, 1]) / car.roll_inertia_kgm2)

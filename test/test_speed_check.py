@@ -56,13 +56,13 @@ def test_the_verdict_needs_evidence_and_a_factor(ratio, gain, wrong, doubtful):
 
 def test_the_full_car_names_km_per_hour_sent_as_m_per_s():
     """The full car's refinement runs the same check on its own likelihood."""
-    from rozyn_estimator.method.full.stage import estimate_full
+    from rozyn_estimator.method.pipeline import estimate
     from rozyn_estimator.vehicle_full import FullVehicle
 
     sim = SimConfig(model="full", duration_s=120.0, seed=11, road=RoadSpec(amplitudes="gaussian"),
                     noise_std_mps2=0.025)
     y = Simulation(sim).run(120.0).accel_mps2
-    est = estimate_full(y, 100.0, FullVehicle(), PipelineConfig(), speed_mps=3.6 * SPEED)
+    est = estimate(y, 100.0, FullVehicle(), PipelineConfig(), speed_mps=3.6 * SPEED)
     assert est.ok and est.stage == "rozyn"
     note = next(n for n in est.notes if "speed topic reads" in n)
     assert float(note.split("reads ")[1].split("×")[0]) == pytest.approx(3.6, rel=0.01), note

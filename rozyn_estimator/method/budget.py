@@ -19,12 +19,11 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import ClassVar
 
 import numpy as np
 
 from rozyn_estimator.body_model import AnyVehicle
-from rozyn_estimator.method.config import FULL_PARAM_NAMES, PARAM_NAMES
+from rozyn_estimator.method.config import PARAM_NAMES
 from rozyn_estimator.method.fit import fit_inertia
 from rozyn_estimator.method.full.uncertainty.moves import (
     ABS_STEP,
@@ -75,7 +74,8 @@ GROUPS = {
     "wheelbase": "wheelbase", "sensor_front_offset": "sensor positions",
     "sensor_rear_offset": "sensor positions", "sensor_gain": "sensor gains",
     "sensor_time_offset": "sensor timing", "cog_height": "heights", "wheel_centre_height": "heights",
-    "drive_model": "varying drive's model",
+    "drive_model": "varying drive's model", "track": "tracks", "anti_roll": "anti-roll bars",
+    "sensor_lateral": "sensor positions", "gyro_misalignment": "gyro turns",
 }
 
 
@@ -85,16 +85,15 @@ def group_of(key: str) -> str:
 
 @dataclass(frozen=True)
 class Budget:
-    """The statistical covariance and the systematic contributions of one estimate."""
+    """The statistical covariance and the systematic contributions of one estimate, either car."""
 
-    NAMES: ClassVar[tuple[str, ...]] = PARAM_NAMES  # the estimated parameters, in order
-
-    statistical: np.ndarray  # (k, k), k = len(NAMES)
+    statistical: np.ndarray  # (k, k), k = len(names)
     contributions: dict[str, np.ndarray] = field(default_factory=dict)  # key -> (k,) shift per 1 u
     calibration: tuple[Calibration, ...] = ()
     # of the contributions, the data-calibrated values' part that varies from window to window
     # (each window calibrates them afresh; the rest is common to every window)
     varying: dict[str, np.ndarray] = field(default_factory=dict)
+    names: tuple[str, ...] = PARAM_NAMES  # the estimated parameters, in order (the car's)
 
     @staticmethod
     def group(key: str) -> str:
@@ -139,24 +138,9 @@ class Budget:
         return {
             "statistical": self.statistical.tolist(),
             "systematic": self.systematic.tolist(),
-            "contributors": {name: dict(self.by_group(i)) for i, name in enumerate(self.NAMES)},
+            "contributors": {name: dict(self.by_group(i)) for i, name in enumerate(self.names)},
             "calibration": [c.to_dict() for c in self.calibration],
         }
-
-
-_FULL_GROUPS = {**GROUPS, "track": "tracks", "anti_roll": "anti-roll bars",
-                "sensor_lateral": "sensor positions", "gyro_misalignment": "gyro turns"}
-
-
-class FullBudget(Budget):
-    """:class:`Budget` over the full car's five parameters and its own tolerances (tracks,
-    anti-roll bars, lateral sensor positions, gyro turns)."""
-
-    NAMES = FULL_PARAM_NAMES
-
-    @staticmethod
-    def group(key: str) -> str:
-        return next((label for prefix, label in _FULL_GROUPS.items() if key.startswith(prefix)), key)
 
 
 def _short(x: float, digits: int) -> str:

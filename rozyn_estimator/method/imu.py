@@ -16,17 +16,13 @@ the stage's band (the body modes) is where it is smallest.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TypeVar
 
 import numpy as np
 from scipy import signal
 
 from rozyn_estimator.body_model import AnyVehicle, channel_rows, corners_of, rolls
 from rozyn_estimator.method.full.spectrum import VehicleSpectrum
-from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import FullVehicle
-
-V = TypeVar("V", Vehicle, FullVehicle)
 
 
 def _converted(v: AnyVehicle) -> bool:
@@ -35,7 +31,7 @@ def _converted(v: AnyVehicle) -> bool:
     return v.sensors is not None and (rolls(v) or any(kind != "accel_z" for kind in v.channel_kinds))
 
 
-def stage_vehicle(vehicle: V) -> V:
+def stage_vehicle(vehicle: AnyVehicle) -> AnyVehicle:
     """The vehicle Rozyn's stage fits: a sensors block's equivalent accelerometers at the corners."""
     if not _converted(vehicle):
         return vehicle
@@ -44,8 +40,8 @@ def stage_vehicle(vehicle: V) -> V:
     return vehicle.replace(sensors=None, sensor_front_offset_m=0.0, sensor_rear_offset_m=0.0)
 
 
-def stage_input(y: np.ndarray, fs_hz: float, vehicle: V,
-                index: tuple[int, ...] | None = None) -> tuple[np.ndarray, V, tuple[int, ...]]:
+def stage_input(y: np.ndarray, fs_hz: float, vehicle: AnyVehicle,
+                index: tuple[int, ...] | None = None) -> tuple[np.ndarray, AnyVehicle, tuple[int, ...]]:
     """(the window as Rozyn's stage reads it, the vehicle and the columns' sensors it reads it
     with): as given for accelerometers (``index`` the columns' sensors, None: all); for a
     sensors block the corners' accelerations from the body's (module docstring)."""

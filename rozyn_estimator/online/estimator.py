@@ -49,7 +49,6 @@ import numpy as np
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import Estimate, PipelineConfig
-from rozyn_estimator.method.full.stage import FullEstimate
 from rozyn_estimator.online.batch import SpeedSamples, as_received, clean_batch
 from rozyn_estimator.online.channel import Channel
 from rozyn_estimator.online.config import OnlineConfig, speed_problem
@@ -71,7 +70,7 @@ class OnlineEstimator:
 
     Args:
         vehicle: the known vehicle parameters: a half car, or a full car (its updates run
-            :func:`~rozyn_estimator.method.full.estimate_full`).
+            :func:`~rozyn_estimator.method.estimate`).
         config: window and schedule settings.
         pipeline: settings of each update.
         names: what to call each sensor in messages (e.g. their topics; default: ``channels``).
@@ -110,7 +109,7 @@ class OnlineEstimator:
         self._last_update: Update | None = None
         self._fusion = Fusion()  # the windows fused since the last load change
         self._reported_losses = 0  # drops and missing samples at the last report
-        self._warm: Estimate | FullEstimate | None = None  # the last published estimate
+        self._warm: Estimate | None = None  # the last published estimate
 
     @classmethod
     def from_config(cls, config: EstimatorConfig) -> OnlineEstimator:

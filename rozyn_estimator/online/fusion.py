@@ -45,7 +45,6 @@ import numpy as np
 from scipy.stats import chi2
 
 from rozyn_estimator.method import Estimate
-from rozyn_estimator.method.full.stage import FullEstimate
 from rozyn_estimator.method.likelihood.road_input import unsteady
 from rozyn_estimator.online.driving import driving_time_s
 from rozyn_estimator.online.records import NS, Job, Update
@@ -57,7 +56,6 @@ CHANGE_P = 1e-6
 MAX_CHAINS = 512  # chains kept since the last change (each an update's; the oldest go first)
 DRIVE_MODEL_FLOOR = 0.003  # the varying drive's model: share of each value (of 1 m for the lateral CoG)
 
-AnyEstimate = Estimate | FullEstimate
 
 
 @dataclass(frozen=True)
@@ -95,7 +93,7 @@ class LoadChange:
                 f"{self.mass_after_kg:.0f} kg ({p})")
 
 
-def statistical_covariance(est: AnyEstimate) -> np.ndarray | None:
+def statistical_covariance(est: Estimate) -> np.ndarray | None:
     """The estimate's statistical covariance (its budget's, else its whole covariance)."""
     if est.budget is not None:
         return np.asarray(est.budget.statistical)
@@ -131,11 +129,11 @@ class Fusion:
         self._stops: dict[int, int] = {}  # stop start -> end [ns], not yet tested
         self._tested: set[int] = set()  # the starts of the stops tested (later windows see them too)
         self._restart_ns = -1  # windows must begin after this to be fused
-        self._fused: AnyEstimate | None = None
+        self._fused: Estimate | None = None
         self._windows = 0
 
     @property
-    def fused(self) -> AnyEstimate | None:
+    def fused(self) -> Estimate | None:
         """The last published fused estimate (what a stop holds)."""
         return self._fused
 
@@ -144,8 +142,8 @@ class Fusion:
         """How many windows the last published estimate fused (0: none yet)."""
         return self._windows
 
-    def add(self, est: AnyEstimate, lo_ns: int, hi_ns: int, stops: list[tuple[int, int]],
-            unsteady: bool = False, probe: bool = False) -> AnyEstimate:
+    def add(self, est: Estimate, lo_ns: int, hi_ns: int, stops: list[tuple[int, int]],
+            unsteady: bool = False, probe: bool = False) -> Estimate:
         """The estimate to publish for a window ``[lo_ns, hi_ns]`` whose own estimate is ``est``,
         the complete stops in it given, ``unsteady`` a stop-and-go window; a ``probe`` (cut to
         a stop's end: :meth:`test_cut`) is fused only where it found a change (see the module)."""
@@ -198,7 +196,7 @@ class Fusion:
         done = [c for c in self._chains if c.hi_ns <= before_ns]
         return max(done, key=lambda c: (c.windows, c.hi_ns)) if done else None
 
-    def _test_stops(self, est: AnyEstimate, stat: np.ndarray, lo_ns: int) -> None:
+    def _test_stops(self, est: Estimate, stat: np.ndarray, lo_ns: int) -> None:
         """Test each stop this window lies wholly after; restart at one where the load changed."""
         for start in sorted(s for s, end in self._stops.items() if end <= lo_ns):
             end = self._stops.pop(start)
@@ -222,7 +220,7 @@ class Fusion:
                 self._stops = {s: e for s, e in self._stops.items() if s > start}
 
 
-def _published(est: AnyEstimate, chain: Chain) -> AnyEstimate:
+def _published(est: Estimate, chain: Chain) -> Estimate:
     """``est`` with the chain's fused estimate and statistical covariance, its own systematic part
     and the varying drive's model's (see the module's docstring)."""
     if chain.windows == 1:
@@ -231,9 +229,9 @@ def _published(est: AnyEstimate, chain: Chain) -> AnyEstimate:
     floor = DRIVE_MODEL_FLOOR * np.maximum(np.abs(params), 1.0) * (chain.unsteady / chain.windows)
     if est.budget is None:
         return dataclasses.replace(est, params=params, covariance=fused_stat + np.diag(floor**2))
-    budget = dataclasses.replace(est.budget, statistical=fused_stat,  # the same kind: the car's
+    budget = dataclasses.replace(est.budget, statistical=fused_stat,
                                  contributions={**est.budget.contributions, "drive_model": floor})
-    return dataclasses.replace(est, params=params, covariance=budget.total, budget=budget)  # type: ignore[arg-type]
+    return dataclasses.replace(est, params=params, covariance=budget.total, budget=budget)
 
 
 def first_stamp_ns(job: Job) -> int | None:

@@ -18,7 +18,6 @@ import numpy as np
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PARAM_NAMES, Estimate
 from rozyn_estimator.method.config import FULL_PARAM_NAMES
-from rozyn_estimator.method.full.stage import FullEstimate
 from rozyn_estimator.method.information import describe
 from rozyn_estimator.sensors import unit_suffix
 from rozyn_estimator.vehicle import Vehicle
@@ -126,7 +125,7 @@ class Update:
     stamp_ns: int  # time of the window's last paired sample (or the due time)
     level: Level
     message: str
-    estimate: Estimate | FullEstimate | None = None  # None when the pipeline was not run
+    estimate: Estimate | None = None  # None when the pipeline was not run
     window_fill: float = 0.0
     fs_hz: float = 0.0
     speed_mps: float | None = None
@@ -183,12 +182,10 @@ def update_values(update: Update, layout: Layout = HALF_LAYOUT) -> dict[str, str
     if est is None:
         return out
     out["pipeline_ms"] = f"{est.elapsed_ms:.2f}"
-    out["stage"] = getattr(est, "stage", "rozyn")  # the full car's stage has no other yet
-    glitches = getattr(est, "glitches", None)  # gated in the window
-    if glitches is not None:
-        out |= {f"glitches_{c}": str(n) for c, n in zip(layout.channels, glitches, strict=True)}
-    rozyn = getattr(est, "rozyn", None)
-    stages = [("", est)] if rozyn is None else [("", est), ("rozyn_", rozyn)]
+    out["stage"] = est.stage
+    if est.glitches:  # gated in the window (none: the window was not checked)
+        out |= {f"glitches_{c}": str(n) for c, n in zip(layout.channels, est.glitches, strict=True)}
+    stages = [("", est)] if est.rozyn is None else [("", est), ("rozyn_", est.rozyn)]
     for prefix, stage in stages:
         if stage.ok and stage.params is not None:
             std = stage.std if stage.std is not None else np.full(len(layout.params), np.nan)
@@ -204,7 +201,7 @@ def update_values(update: Update, layout: Layout = HALF_LAYOUT) -> dict[str, str
             out[f"{name}_budget"] = budget.text(i)
         for c in budget.calibration:
             out[f"calibrated {c.name}"] = c.text()
-    out |= _refinement_values(getattr(est, "refinement", None), layout)
+    out |= _refinement_values(est.refinement, layout)
     for i, mode in enumerate(est.modes):
         out[f"mode{i + 1}_freq_hz"] = f"{mode.freq_hz:.4f}"
         out[f"mode{i + 1}_damping"] = f"{mode.damping_ratio:.4f}"

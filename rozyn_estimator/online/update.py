@@ -1,8 +1,7 @@
 """One scheduled update of the online estimator: align the window, check it, run the pipeline.
 
-ROS-free; called by :meth:`OnlineEstimator.compute` outside its lock. The half car's
-update runs :func:`~rozyn_estimator.method.estimate` on its front and rear channels, the
-full car's :func:`~rozyn_estimator.method.full.estimate_full` on its three or four corners.
+ROS-free; called by :meth:`OnlineEstimator.compute` outside its lock. It runs
+:func:`~rozyn_estimator.method.estimate` on the layout's channels, either car.
 """
 
 from __future__ import annotations
@@ -16,7 +15,6 @@ from threadpoolctl import ThreadpoolController
 
 from rozyn_estimator.method import Estimate, PipelineConfig, estimate
 from rozyn_estimator.method.drive import speed_spread, window_speed
-from rozyn_estimator.method.full.stage import FullEstimate, estimate_full
 from rozyn_estimator.online.config import OnlineConfig
 from rozyn_estimator.online.driving import driving_time_s, standing
 from rozyn_estimator.online.pairing import align_channels
@@ -26,7 +24,7 @@ from rozyn_estimator.vehicle_full import FullVehicle
 
 
 def compute_update(job: Job, names: Sequence[str], cfg: OnlineConfig, vehicle: Vehicle | FullVehicle,
-                   pipeline: PipelineConfig, warm: Estimate | FullEstimate | None,
+                   pipeline: PipelineConfig, warm: Estimate | None,
                    layout: Layout = HALF_LAYOUT) -> Update:
     """One update: align the window's channels, check its fill and speed, run the pipeline.
 
@@ -59,7 +57,7 @@ def _controller() -> ThreadpoolController:
 
 
 def _compute(job: Job, names: Sequence[str], cfg: OnlineConfig, vehicle: Vehicle | FullVehicle,
-             pipeline: PipelineConfig, warm: Estimate | FullEstimate | None, layout: Layout) -> Update:
+             pipeline: PipelineConfig, warm: Estimate | None, layout: Layout) -> Update:
     """:func:`compute_update`'s work."""
     paired = align_channels(job.samples, cfg)
     if isinstance(paired, str):
@@ -98,13 +96,7 @@ def _compute(job: Job, names: Sequence[str], cfg: OnlineConfig, vehicle: Vehicle
                           speed_mps=float(np.mean(s)))
         # one speed per sample: the refinement models the varying wheelbase delay
         speed = np.interp(t_ns.astype(float), job.speed[0].astype(float), s)
-    est: Estimate | FullEstimate
-    if isinstance(vehicle, FullVehicle):
-        est = estimate_full(accel, fs, vehicle, pipeline, speed_mps=speed, sensors=layout.channels,
-                            warm=warm if isinstance(warm, FullEstimate) else None)
-    else:
-        est = estimate(accel, fs, vehicle, pipeline, speed_mps=speed,
-                       warm_start=warm if isinstance(warm, Estimate) else None)
+    est = estimate(accel, fs, vehicle, pipeline, speed_mps=speed, warm_start=warm, sensors=layout.channels)
     speed_mps = window_speed(speed)[0]
     if not est.ok:
         return Update(stamp, WARN, f"identification failed: {est.reason}", est, fill, fs, speed_mps)
@@ -123,7 +115,7 @@ def _speed_silence_s(job: Job, t_ns: np.ndarray) -> float:
     return float(np.max(np.diff(edges), initial=0.0)) / NS
 
 
-def _publishable(est: Estimate | FullEstimate, layout: Layout) -> bool:
+def _publishable(est: Estimate, layout: Layout) -> bool:
     """Finite estimates with a finite covariance; mass, inertias and CoG distance positive (the
     full car's lateral CoG may have either sign)."""
     p, cov, k = est.params, est.covariance, len(layout.params)

@@ -22,13 +22,11 @@ from typing import Any
 import numpy as np
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.method import METHODS, Estimate, PipelineConfig, estimate
-from rozyn_estimator.method.full.stage import FullEstimate, estimate_full
+from rozyn_estimator.method import METHODS
 from rozyn_estimator.vehicle import Vehicle, load_vehicle
 from rozyn_estimator.vehicle_full import FullVehicle, load_full_vehicle
 
 AnyVehicle = Vehicle | FullVehicle
-AnyEstimate = Estimate | FullEstimate
 
 
 @dataclass(frozen=True)
@@ -80,16 +78,6 @@ def _told_full(vehicle: Any, errors: dict[str, float]) -> Any:
     return dataclasses.replace(vehicle, **changes) if changes else vehicle
 
 
-def _estimate_half(accel: np.ndarray, fs_hz: float, vehicle: Any, cfg: PipelineConfig,
-                   speed_mps: float | np.ndarray, channels: tuple[str, ...], warm: Any) -> AnyEstimate:
-    return estimate(accel, fs_hz, vehicle, cfg, speed_mps=speed_mps, warm_start=warm)
-
-
-def _estimate_full(accel: np.ndarray, fs_hz: float, vehicle: Any, cfg: PipelineConfig,
-                   speed_mps: float | np.ndarray, channels: tuple[str, ...], warm: Any) -> AnyEstimate:
-    return estimate_full(accel, fs_hz, vehicle, cfg, speed_mps, sensors=channels, warm=warm)
-
-
 @dataclass(frozen=True)
 class Car:
     """A vehicle model of the tools: what it estimates, senses, simulates and runs."""
@@ -106,7 +94,6 @@ class Car:
     noise_stream: int  # the relative sensor noise's random stream per seed (the simulator's are below)
     load: Callable[[str], Any]  # reads its vehicle file
     told: Callable[[Any, dict[str, float]], Any]  # the vehicle with the ``*_error`` shares applied
-    run_estimator: Callable[..., AnyEstimate]  # (accel, fs_hz, vehicle, cfg, speed_mps, channels, warm)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -186,13 +173,13 @@ SECOND_FULL_VEHICLE = FullVehicle(
 HALF = Car("half", "half car", (_MASS, _PITCH, _COG), n_modes=2, channels=(("front", "f"), ("rear", "r")),
            methods=tuple(METHODS), default_method="rozyn", vehicle_type=Vehicle,
            presets={"table5-1": Vehicle(), "second": SECOND_VEHICLE}, noise_stream=3, load=load_vehicle,
-           told=_told_half, run_estimator=_estimate_half)
+           told=_told_half)
 FULL = Car("full", "full car", (_MASS, _ROLL, _PITCH, _COG, _LATERAL), n_modes=3,
            channels=(("front left", "fl"), ("front right", "fr"), ("rear left", "rl"), ("rear right", "rr")),
            methods=("likelihood", "rozyn"), default_method="likelihood", vehicle_type=FullVehicle,
            presets={"table5-1": FullVehicle(), "second": SECOND_FULL_VEHICLE},
            # its own stream: the roads' are 0 and 1, the simulator's noise 2, the right track's 3
-           noise_stream=4, load=load_full_vehicle, told=_told_full, run_estimator=_estimate_full)
+           noise_stream=4, load=load_full_vehicle, told=_told_full)
 CARS = {c.name: c for c in (HALF, FULL)}
 
 

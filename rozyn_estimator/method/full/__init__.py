@@ -1,5 +1,4 @@
-"""The one likelihood refinement and the full car's Rozyn stage, ROS-free: the vehicle's spectral
-model (:mod:`.spectrum`, either car), its Whittle fit (:mod:`.refine`), calibration and budget
-(:mod:`.uncertainty`); the full car's modal fit (:mod:`.fit`) and its window's update
-(:func:`.stage.estimate_full`). The package imports nothing itself: its modules are imported by
-name (the half car's pipeline imports the refinement without the full car's stage)."""
+"""The likelihood fit of the whole vehicle, either car, ROS-free: the vehicle's spectral model
+(:mod:`.spectrum`), its Whittle fit (:mod:`.refine`), the road's intermittency and a varying
+drive's stretches, the model check, calibration and budget (:mod:`.uncertainty`). The package
+imports nothing itself: its modules are imported by name."""

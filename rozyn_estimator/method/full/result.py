@@ -1,4 +1,4 @@
-"""The full car's likelihood refinement's result (:func:`~rozyn_estimator.method.full.refine.refine`)."""
+"""The likelihood refinement's result, either car (:func:`~.refine.refine`)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """The vehicle's spectral model: :class:`VehicleSpectrum` (the k×k spectral matrix of the body's
 channels driven by the road, its parameters θ and dS/dθ), for the full car and the half car (its
 two corners on the centreline, one track, no roll: ``q = (z₀, φ)``). Each corner is its
-suspension (with the anti-roll bars: :func:`~rozyn_estimator.method.full.corner_matrices.corner_matrices`)
+suspension (with the anti-roll bars: :func:`~.corner_matrices.corner_matrices`)
 on its wheel on its tyre; condensing the wheels exactly, the corners push on the body with
 ``F = -Z(ω) x_c + T(ω) u`` (4×4 each, known). The body's coordinates are taken
 at the front axle's centre, ``q = (z₀, φ, θ)``: a point ``(x, y)`` moves
@@ -331,7 +331,7 @@ class VehicleSpectrum:
 
     def corner_derivatives(self, theta: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """dS (G, nodes, k, k) at θ along ``directions`` (G, values) of the corners' values
-        (:func:`~rozyn_estimator.method.full.corner_matrices.corner_response_derivatives`): ``D = Bᵀ Z B -
+        (:func:`~.corner_matrices.corner_response_derivatives`): ``D = Bᵀ Z B -
         ω² M`` and ``Bᵀ T`` move, so ``dH = D⁻¹ (Bᵀ dT - Bᵀ dZ B H)``, and ``d(H R Hᴴ) = dH R Hᴴ
         + h.c.`` — one batched pass instead of a model evaluation per value. The wheels' masses
         also swing with the rotations (``μ h²`` in ``M``, where the vehicle gives its heights)."""

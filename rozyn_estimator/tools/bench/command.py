@@ -23,7 +23,6 @@ from typing import Any
 import numpy as np
 
 from rozyn_estimator.method import METHODS, PipelineConfig, estimate
-from rozyn_estimator.method.full.stage import estimate_full
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.tools.options import with_sensor_preset
 from rozyn_estimator.tools.trial.run import limit_threads
@@ -97,13 +96,13 @@ def _full_car_figures(repeats: int, half_warm: Callable[[], Any],
     window = live.run(120.0).accel_mps2
     nxt = np.vstack([window[500:], live.run(5.0).accel_mps2])
     speed = live.config.speed_mps
-    warm = estimate_full(window, 100.0, vehicle, PipelineConfig(), speed)
+    warm = estimate(window, 100.0, vehicle, PipelineConfig(), speed)
 
     def full_cold() -> Any:
-        return estimate_full(window, 100.0, vehicle, PipelineConfig(), speed)
+        return estimate(window, 100.0, vehicle, PipelineConfig(), speed)
 
     def full_warm() -> Any:
-        return estimate_full(nxt, 100.0, vehicle, PipelineConfig(), speed, warm=warm)
+        return estimate(nxt, 100.0, vehicle, PipelineConfig(), speed, warm_start=warm)
 
     cold_ms, half_cold_ms = _paired_ms([full_cold, half_cold], max(5, repeats // 2))
     warm_ms, half_warm_ms = _paired_ms([full_warm, half_warm], repeats)
@@ -164,8 +163,8 @@ def _warm_update(vehicle: Vehicle | FullVehicle) -> Callable[[], Any]:
     speed = live.config.speed_mps
     if isinstance(vehicle, FullVehicle):
         full = vehicle
-        warm_full = estimate_full(window, 100.0, full, PipelineConfig(), speed)
-        return lambda: estimate_full(nxt, 100.0, full, PipelineConfig(), speed, warm=warm_full)
+        warm_full = estimate(window, 100.0, full, PipelineConfig(), speed)
+        return lambda: estimate(nxt, 100.0, full, PipelineConfig(), speed, warm_start=warm_full)
     half = vehicle
     warm = estimate(window, 100.0, half, PipelineConfig(), speed)
     return lambda: estimate(nxt, 100.0, half, PipelineConfig(), speed, warm_start=warm)

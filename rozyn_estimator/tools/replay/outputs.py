@@ -28,7 +28,6 @@ import numpy as np
 from rozyn_estimator.bag import BagReader, BagWriter
 from rozyn_estimator.errors import BagError
 from rozyn_estimator.method import Estimate
-from rozyn_estimator.method.full.stage import FullEstimate
 from rozyn_estimator.online import (
     CUSTOM_DATA_KEY,
     HALF_LAYOUT,
@@ -109,7 +108,7 @@ def utc() -> str:
     return datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
 
 
-def published_estimate(update: Update) -> Estimate | FullEstimate | None:
+def published_estimate(update: Update) -> Estimate | None:
     """The estimate an update published, None when it published none.
 
     Args:

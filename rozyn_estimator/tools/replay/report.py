@@ -84,7 +84,7 @@ def _channel_shares(result: ReplayResult) -> list[str]:
     parameter's information lost without it (:mod:`rozyn_estimator.method.information`)."""
     for ru in reversed(result.updates):
         est = published_estimate(ru.update)
-        lost = getattr(getattr(est, "refinement", None), "information_lost", ())
+        lost = est.refinement.information_lost if est is not None and est.refinement is not None else ()
         if est is not None and lost:
             layout = result.config.layout
             width = max(len(c) for c in layout.channels)

@@ -28,7 +28,7 @@ import numpy as np
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import Estimate
-from rozyn_estimator.tools.cars import CARS, FULL, HALF, AnyEstimate, Car
+from rozyn_estimator.tools.cars import CARS, FULL, HALF, Car
 from rozyn_estimator.tools.study.settings import Cell, StudySettings, fmt_value
 from rozyn_estimator.tools.trial.run import TrialResult
 
@@ -85,7 +85,7 @@ class TrialRow:
         if len(est.modes) >= n_modes:
             modes = tuple(float(x) for md in est.modes[:n_modes] for x in (md.freq_hz, md.damping_ratio))
         return cls(cell, trial, result.seed, est.status, _params(est.params), modes, est.reason,
-                   getattr(est, "stage", "rozyn"), _params(est.std), _params(_statistical_std(est)))
+                   est.stage, _params(est.std), _params(est.statistical_std))
 
     def to_csv(self, model: Car = HALF) -> list[str]:
         def num(values: Sequence[float] | None, n: int) -> list[str]:
@@ -118,13 +118,6 @@ class TrialRow:
 def _params(values: Sequence[float] | np.ndarray | None) -> Params | None:
     """The parameters as floats (None stays None)."""
     return None if values is None else tuple(float(v) for v in values)
-
-
-def _statistical_std(est: AnyEstimate) -> np.ndarray | None:
-    """The std of the statistical part alone: the budget's statistical covariance, or the
-    covariance when there is no budget."""
-    cov = est.budget.statistical if est.budget is not None else est.covariance
-    return None if cov is None else np.sqrt(np.diag(cov))
 
 
 def read_results(path: Path, model: Car | None = None) -> list[TrialRow]:

@@ -18,7 +18,8 @@ from typing import Any
 import numpy as np
 
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.tools.cars import CARS, AnyEstimate
+from rozyn_estimator.method import Estimate, estimate
+from rozyn_estimator.tools.cars import CARS
 from rozyn_estimator.tools.trial.spec import TrialSpec
 from sim_node.simulation import SimBlock, Simulation
 
@@ -26,7 +27,7 @@ from sim_node.simulation import SimBlock, Simulation
 @dataclass(frozen=True)
 class TrialResult:
     seed: int
-    estimate: AnyEstimate
+    estimate: Estimate
     truth: np.ndarray  # (k,) in the car's parameter order
     sim_ms: float
     model: str = "half"  # the car: "half" or "full"
@@ -67,7 +68,7 @@ def run_trial(spec: TrialSpec, seed: int) -> TrialResult:
 
 
 def estimate_block(spec: TrialSpec, block: SimBlock, method: str | None = None, warm: Any = None,
-                   n: int | None = None) -> AnyEstimate:
+                   n: int | None = None) -> Estimate:
     """Run the car's estimator of ``method`` (default: the spec's) on a simulated block (its
     first ``n`` samples; default: all), warm-started from ``warm`` if given.
 
@@ -77,8 +78,8 @@ def estimate_block(spec: TrialSpec, block: SimBlock, method: str | None = None, 
     accel, speed = block.accel_mps2, block.speed_mps * (1.0 + spec.speed_error)
     if n is not None:
         accel, speed = accel[:n], speed[:n] if np.ndim(speed) else speed
-    return spec.car.run_estimator(accel, spec.rate_hz, spec.estimator_vehicle, spec.pipeline_config(method),
-                                  speed, tuple(block.channels), warm)
+    return estimate(accel, spec.rate_hz, spec.estimator_vehicle, spec.pipeline_config(method), speed, warm,
+                    tuple(block.channels))
 
 
 def _run_trial_args(args: tuple[TrialSpec, int]) -> TrialResult:
