@@ -180,7 +180,7 @@ def second_order_model(v: AnyVehicle) -> SecondOrderModel:
 
 def channel_rows(v: AnyVehicle, sensors: Sequence[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """((k, b) each channel's row on the body's ``(z₀, φ[, θ])`` (``z₀`` at the front axle's
-    centre: :mod:`rozyn_estimator.method.full.spectrum`), (k,) bool: the channel reads the rate,
+    centre: :mod:`rozyn_estimator.method.vehicle_fit.spectrum`), (k,) bool: the channel reads the rate,
     a gyro) for the channels ``sensors`` (default all). An accelerometer at ``(x, y)`` reads
     ``(1, -x, y)``, a gyro its :data:`GYRO_ROWS` row."""
     index = list(range(len(v.channel_kinds)) if sensors is None else sensors)

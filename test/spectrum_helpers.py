@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from rozyn_estimator.body_model import AnyVehicle
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
 from sim_node.vehicle_plant import state_space
 
 

@@ -9,9 +9,9 @@ import pytest
 from spectrum_helpers import assert_slopes, model_response, plant_response
 
 from rozyn_estimator.method.body_parameters import BodyParameters
-from rozyn_estimator.method.full.corner_matrices import corner_value_count
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum
-from rozyn_estimator.method.full.uncertainty.moves import values_of
+from rozyn_estimator.method.vehicle_fit.corner_matrices import corner_value_count
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
+from rozyn_estimator.method.vehicle_fit.uncertainty.moves import values_of
 from rozyn_estimator.sensors import sensors_from_mapping
 from rozyn_estimator.vehicle import Vehicle
 

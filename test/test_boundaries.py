@@ -136,7 +136,7 @@ def test_tools_keep_their_finer_rules(name):
 
 
 def test_no_folder_holds_more_than_15_modules():
-    """Group modules by concern in sub-packages instead (tools/trial/, method/full/uncertainty/ …)."""
+    """Group modules by concern in sub-packages instead (tools/trial/, method/vehicle_fit/uncertainty/ …)."""
     folders = {p.parent for pkg in (PKG, "sim_node") for p in (ROOT / pkg).rglob("*.py")}
     crowded = {str(f.relative_to(ROOT)): n for f in folders if (n := len(list(f.glob("*.py")))) > 15}
     assert crowded == {}

@@ -13,8 +13,8 @@ import pytest
 
 from rozyn_estimator.method import METHODS, PipelineConfig, estimate
 from rozyn_estimator.method.budget import Budget, rozyn_contributions
-from rozyn_estimator.method.full.refine import refine as refine_vehicle
 from rozyn_estimator.method.likelihood import LikelihoodConfig
+from rozyn_estimator.method.vehicle_fit.refine import refine as refine_vehicle
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.departures import Departures
@@ -128,7 +128,7 @@ def test_asymmetric_dampers_fail_the_model_fit_check(clean):
 
 
 def test_a_model_fit_check_on_a_singular_spectrum_is_not_computable_not_fits(clean, monkeypatch):
-    from rozyn_estimator.method.full import fitcheck
+    from rozyn_estimator.method.vehicle_fit import fitcheck
 
     real = fitcheck.whiteness
 
@@ -148,8 +148,8 @@ def test_a_model_fit_check_on_a_singular_spectrum_is_not_computable_not_fits(cle
 def test_a_model_fit_check_whose_statistic_is_not_a_number_gives_no_verdict(clean, monkeypatch):
     """Whatever makes the statistic NaN or infinite, the check says it could not be computed:
     a NaN's p-value is never below the threshold, which would otherwise read as "fits"."""
-    from rozyn_estimator.method.full import refine as one
     from rozyn_estimator.method.likelihood import fitcheck
+    from rozyn_estimator.method.vehicle_fit import refine as one
 
     monkeypatch.setattr(one, "neighbour_correlation", lambda window_dft: math.nan)
     fit = refine(clean, 100.0, EXACT, START, SPEED).model_fit

@@ -1,4 +1,4 @@
-"""The full car's sensors calibrated by the data (method/full/uncertainty/calibrate.py,
+"""The full car's sensors calibrated by the data (method/vehicle_fit/uncertainty/calibrate.py,
 sensing.py): the model's derivatives by the sensors' values, the copy that calibrates, and what
 it is for — an uncertainty neither 10x too large on quiet data nor too small when a gain is off."""
 
@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.method.budget import Calibration
-from rozyn_estimator.method.full import refine
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum
-from rozyn_estimator.method.full.uncertainty import calibrate
-from rozyn_estimator.method.full.uncertainty.calibrate import VehicleCalibration, sensor_groups
-from rozyn_estimator.method.full.uncertainty.corners import CornerCalibrating, corner_keys
 from rozyn_estimator.method.pipeline import Estimate, PipelineConfig, estimate
+from rozyn_estimator.method.vehicle_fit import refine
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
+from rozyn_estimator.method.vehicle_fit.uncertainty import calibrate
+from rozyn_estimator.method.vehicle_fit.uncertainty.calibrate import VehicleCalibration, sensor_groups
+from rozyn_estimator.method.vehicle_fit.uncertainty.corners import CornerCalibrating, corner_keys
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec

@@ -11,11 +11,11 @@ import pytest
 from scipy.signal import windows
 
 from rozyn_estimator.method import METHODS
-from rozyn_estimator.method.full.grid import averaging_matrix, expected_periodogram_m2
-from rozyn_estimator.method.full.refine import refine
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.pipeline import estimate
+from rozyn_estimator.method.vehicle_fit.grid import averaging_matrix, expected_periodogram_m2
+from rozyn_estimator.method.vehicle_fit.refine import refine
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation

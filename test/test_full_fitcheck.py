@@ -1,4 +1,4 @@
-"""The full car's model-fit check (method/full/fitcheck.py): silent on the model's own data (also
+"""The full car's model-fit check (method/vehicle_fit/fitcheck.py): silent on the model's own data (also
 on noise-free sensors), a WARN (a note) where the suspension departs from it."""
 
 from __future__ import annotations

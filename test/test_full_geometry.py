@@ -8,8 +8,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum
-from rozyn_estimator.method.full.uncertainty.geometry import GEOMETRY, geometry_derivatives
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
+from rozyn_estimator.method.vehicle_fit.uncertainty.geometry import GEOMETRY, geometry_derivatives
 from rozyn_estimator.vehicle_full import FullVehicle
 
 BARS = {"anti_roll_stiffness_front_nmprad": 20000.0, "anti_roll_stiffness_rear_nmprad": 8000.0}

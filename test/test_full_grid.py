@@ -13,18 +13,18 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.method import PipelineConfig
-from rozyn_estimator.method.full import whittle
-from rozyn_estimator.method.full.corner_matrices import (
+from rozyn_estimator.method.pipeline import estimate
+from rozyn_estimator.method.vehicle_fit import whittle
+from rozyn_estimator.method.vehicle_fit.corner_matrices import (
     CORNER_VALUES,
     corner_matrices,
     corner_matrix_derivatives,
     corner_response_derivatives,
 )
-from rozyn_estimator.method.full.grid import ALIAS_SPACING_HZ, alias_map
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum
-from rozyn_estimator.method.full.uncertainty import refine_budget
-from rozyn_estimator.method.full.whittle import WhittleObjective
-from rozyn_estimator.method.pipeline import estimate
+from rozyn_estimator.method.vehicle_fit.grid import ALIAS_SPACING_HZ, alias_map
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
+from rozyn_estimator.method.vehicle_fit.uncertainty import refine_budget
+from rozyn_estimator.method.vehicle_fit.whittle import WhittleObjective
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation

@@ -1,5 +1,5 @@
 """The full car's covariance on an intermittent road: the envelope's κ from the samples'
-kurtosis, and where it raises the published variances (rozyn_estimator.method.full.intermittency)."""
+kurtosis, and where it raises the published variances (rozyn_estimator.method.vehicle_fit.intermittency)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import pytest
 from scipy import signal
 
 from rozyn_estimator.method import METHODS
-from rozyn_estimator.method.full import intermittency, refine
-from rozyn_estimator.method.full.intermittency import road_intermittency, road_itself
 from rozyn_estimator.method.pipeline import estimate
+from rozyn_estimator.method.vehicle_fit import intermittency, refine
+from rozyn_estimator.method.vehicle_fit.intermittency import road_intermittency, road_itself
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation

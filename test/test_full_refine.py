@@ -1,4 +1,4 @@
-"""The full car's likelihood refinement (method.full.refine): its spectral model against the
+"""The full car's likelihood refinement (method.vehicle_fit.refine): its spectral model against the
 simulator, its derivatives, the fit and its covariance, the warm start, the budget against a
 wrong assumed value, and the fallbacks."""
 
@@ -12,9 +12,9 @@ import pytest
 from spectrum_helpers import assert_slopes, model_response, plant_response
 
 from rozyn_estimator.method import PipelineConfig
-from rozyn_estimator.method.full.refine import refine
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.pipeline import estimate
+from rozyn_estimator.method.vehicle_fit.refine import refine
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation

@@ -1,5 +1,5 @@
 """The full car's published covariance is the sandwich with the score's covariance under the
-model (method/full/score.py): untapered, on the fit's own S, it is the inverse Fisher
+model (method/vehicle_fit/score.py): untapered, on the fit's own S, it is the inverse Fisher
 information; tapered its
 sum by the midpoint rule is the sum over every pair of bins, and a warm update on a window
 of the same length keeps its ratio."""
@@ -11,11 +11,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-import rozyn_estimator.method.full.refine as refine_module
-import rozyn_estimator.method.full.score as score_module
+import rozyn_estimator.method.vehicle_fit.refine as refine_module
+import rozyn_estimator.method.vehicle_fit.score as score_module
 from rozyn_estimator.method import PipelineConfig
-from rozyn_estimator.method.full.score import score_covariance
 from rozyn_estimator.method.pipeline import estimate
+from rozyn_estimator.method.vehicle_fit.score import score_covariance
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation

@@ -1,4 +1,4 @@
-"""Rozyn's pipeline on the full car (method.full): the linear fit of the three body modes,
+"""Rozyn's pipeline on the full car (method.vehicle_fit): the linear fit of the three body modes,
 the free decay, road-driven windows and the input guards."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""A varying drive's stretches in the full car's covariance (rozyn_estimator.method.full.stretches):
+"""A varying drive's stretches in the full car's covariance (rozyn_estimator.method.vehicle_fit.stretches):
 the samples grouped by speed, and the factors they give the published variances."""
 
 from __future__ import annotations
@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.method import METHODS
-from rozyn_estimator.method.full import intermittency, refine, stretches
-from rozyn_estimator.method.full.stretches import drive_stretches
 from rozyn_estimator.method.likelihood.road_input import DRIVING_MPS
 from rozyn_estimator.method.likelihood.spectra import taper_window
 from rozyn_estimator.method.pipeline import estimate
+from rozyn_estimator.method.vehicle_fit import intermittency, refine, stretches
+from rozyn_estimator.method.vehicle_fit.stretches import drive_stretches
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
 from sim_node.simulation import SimConfig, Simulation

@@ -1,5 +1,5 @@
 """The likelihood refinement of the half car (its front and rear channels through the one
-refinement, :func:`~rozyn_estimator.method.full.refine.refine`): its fit from poor and
+refinement, :func:`~rozyn_estimator.method.vehicle_fit.refine.refine`): its fit from poor and
 missing starts, a warm start, its failures as statuses, and the pipeline around it."""
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ import pytest
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS, PARAM_NAMES, PipelineConfig, estimate
-from rozyn_estimator.method.full.refine import refine as refine_vehicle
 from rozyn_estimator.method.likelihood import LikelihoodConfig
 from rozyn_estimator.method.likelihood.road_input import delay_characteristic
+from rozyn_estimator.method.vehicle_fit.refine import refine as refine_vehicle
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.vehicle import Vehicle
 from sim_node.road import RoadSpec

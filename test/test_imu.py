@@ -11,8 +11,8 @@ from bag_helpers import write_imu_bag
 from rozyn_estimator.bag import open_bag
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PipelineConfig
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.pipeline import estimate
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
 from rozyn_estimator.online import EstimatorConfig
 from rozyn_estimator.sensors import sensors_from_mapping
 from rozyn_estimator.tolerances import Tolerances

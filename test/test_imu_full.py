@@ -12,9 +12,9 @@ from rozyn_estimator.bag import open_bag
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.method.config import FULL_PARAM_NAMES
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.imu import gyro_sign_problem, stage_input
 from rozyn_estimator.method.pipeline import estimate
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
 from rozyn_estimator.online import EstimatorConfig
 from rozyn_estimator.online.records import OK, Update, layout_of, update_values
 from rozyn_estimator.sensors import sensors_from_mapping

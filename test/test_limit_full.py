@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.method.config import FULL_PARAM_NAMES
-from rozyn_estimator.method.full.refine import refine
+from rozyn_estimator.method.vehicle_fit.refine import refine
 from rozyn_estimator.tools.cli import main
 from rozyn_estimator.tools.trial.limit import infinite_data_limit, record_spectra
 from rozyn_estimator.tools.trial.run import simulate

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.method import METHODS
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.road_input import driving_speed, spatial_band
 from rozyn_estimator.method.pipeline import estimate
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec

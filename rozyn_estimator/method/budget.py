@@ -7,11 +7,11 @@ Every assumed value ``β_j`` with a tolerance ``u_j`` (a standard uncertainty, s
 when it is one standard uncertainty off; the systematic covariance is ``Σ_j c_j c_jᵀ``
 (the values independent) and the published covariance the sum of both parts. The
 sensitivities are exact derivatives of each stage: of the refinement's optimum
-(:mod:`rozyn_estimator.method.full.uncertainty.refine_budget`) and of Rozyn's linear fit
+(:mod:`rozyn_estimator.method.vehicle_fit.uncertainty.refine_budget`) and of Rozyn's linear fit
 (:func:`rozyn_contributions`, central differences of the fit on the measured modes).
 Values the data calibrate themselves (:class:`Calibration`: the sensors' gains, positions and
 timing, the corners' values, with their tolerances as priors) contribute what their posterior
-leaves (:mod:`rozyn_estimator.method.full.uncertainty.calibrate`).
+leaves (:mod:`rozyn_estimator.method.vehicle_fit.uncertainty.calibrate`).
 """
 
 from __future__ import annotations
@@ -25,13 +25,13 @@ import numpy as np
 from rozyn_estimator.body_model import AnyVehicle
 from rozyn_estimator.method.config import PARAM_NAMES
 from rozyn_estimator.method.fit import fit_inertia
-from rozyn_estimator.method.full.uncertainty.moves import (
+from rozyn_estimator.method.identification import IdentificationError, Mode
+from rozyn_estimator.method.vehicle_fit.uncertainty.moves import (
     ABS_STEP,
     axle_channels,
     shifted_sensor,
     vehicle_moves,
 )
-from rozyn_estimator.method.identification import IdentificationError, Mode
 
 
 @dataclass(frozen=True)

@@ -83,6 +83,6 @@ METHODS: dict[str, PipelineConfig] = {
         gamma=2, correlation="thesis-acf", stiffness_model="eq2-21", fit="stiffness-block",
         freq_band_hz=(1.0, 3.0), damping_band=(0.1, 0.5), skip_wheelbase_delay=False, refine="none",
     ),
-    # Rozyn's pipeline, then the Whittle fit of the whole vehicle (method/full/refine.py).
+    # Rozyn's pipeline, then the Whittle fit of the whole vehicle (method/vehicle_fit/refine.py).
     "likelihood": PipelineConfig(),
 }

@@ -21,7 +21,7 @@ import numpy as np
 from scipy import signal
 
 from rozyn_estimator.body_model import AnyVehicle, channel_rows, corners_of, rolls
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
 from rozyn_estimator.vehicle_full import FullVehicle
 
 

@@ -8,7 +8,7 @@ parameters out (DESIGN.md, "The pipeline"). Pure functions over arrays:
    fit of the body's parameters (2-4) — from an IMU through the corners' accelerations
    (:mod:`.imu`);
 3. (``refine="likelihood"``, the default) the frequency-domain maximum-likelihood fit of the
-   whole vehicle (:func:`~rozyn_estimator.method.full.refine.refine`) started from Rozyn's
+   whole vehicle (:func:`~rozyn_estimator.method.vehicle_fit.refine.refine`) started from Rozyn's
    estimate (or the previous window's optimum), with its covariance and the tolerances'
    contributions (:class:`~rozyn_estimator.method.budget.Budget`). Rozyn's stage then skips its
    jackknife unless the refinement fails, when Rozyn's estimate is published with a note (on a
@@ -35,13 +35,13 @@ from rozyn_estimator.method.budget import Budget, rozyn_contributions
 from rozyn_estimator.method.config import FULL_PARAM_NAMES, PARAM_NAMES, PipelineConfig
 from rozyn_estimator.method.drive import constant_speed_only, varying_drive, window_speed
 from rozyn_estimator.method.fit import characteristic_matrix, corner_shapes
-from rozyn_estimator.method.full.refine import refine
-from rozyn_estimator.method.full.result import Refinement
 from rozyn_estimator.method.glitches import InputError, checked_window
 from rozyn_estimator.method.identification import IdentificationError, Mode
 from rozyn_estimator.method.imu import gyro_sign_problem, stage_input, stage_vehicle
 from rozyn_estimator.method.load_transfer import carries_load_transfer, fit_without_load_transfer
 from rozyn_estimator.method.modal_stage import rozyn_fit
+from rozyn_estimator.method.vehicle_fit.refine import refine
+from rozyn_estimator.method.vehicle_fit.result import Refinement
 from rozyn_estimator.vehicle_full import CORNERS
 
 

@@ -1,5 +1,5 @@
 """What the likelihood refinement returns, for either car: :class:`LikelihoodResult`, the fields
-of its result (:class:`~rozyn_estimator.method.full.result.Refinement` adds the model check,
+of its result (:class:`~rozyn_estimator.method.vehicle_fit.result.Refinement` adds the model check,
 the sandwich ratio and the calibration, whose types live with the likelihood)."""
 
 from __future__ import annotations

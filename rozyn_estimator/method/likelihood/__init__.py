@@ -1,4 +1,4 @@
-"""What the likelihood refinement (:mod:`rozyn_estimator.method.full.refine`, the one for every
+"""What the likelihood refinement (:mod:`rozyn_estimator.method.vehicle_fit.refine`, the one for every
 car) stands on, ROS-free:
 
 - ``config``: :class:`LikelihoodConfig`, the settings;

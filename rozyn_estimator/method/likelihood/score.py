@@ -1,4 +1,4 @@
-"""What the covariance of the Whittle score under the model (:mod:`rozyn_estimator.method.full.score`:
+"""What the covariance of the Whittle score under the model (:mod:`rozyn_estimator.method.vehicle_fit.score`:
 the sum ``Σ_(k,k') Re tr(A_ik C_kk' A_jk' C_k'k)`` over the band's pairs of bins, for a tapered
 window whose neighbouring DFT ordinates are correlated) is computed with: the lags' covariances
 ``C_kk'``, the midpoint rule's bins and partners; and the sandwich's ratio a warm update keeps

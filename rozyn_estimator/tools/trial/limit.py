@@ -1,6 +1,6 @@
 """``rozyn trial --model full --limit``: the full car's estimate in the limit of infinite data.
 
-One fit (:func:`~rozyn_estimator.method.full.refine.refine`) to the periodogram matrices
+One fit (:func:`~rozyn_estimator.method.vehicle_fit.refine.refine`) to the periodogram matrices
 averaged over every seed's record of one condition. Averaging removes the records' sampling
 scatter but not what the model gets wrong, so the limit's departure from the truth is the
 model's own bias (a simulator and an estimator that disagree, a departure the vehicle file does
@@ -26,8 +26,8 @@ import numpy as np
 
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method.config import FULL_PARAM_NAMES
-from rozyn_estimator.method.full.refine import Refinement, refine
 from rozyn_estimator.method.likelihood.spectra import Spectra, window_spectra
+from rozyn_estimator.method.vehicle_fit.refine import Refinement, refine
 from rozyn_estimator.tools.cars import FULL
 from rozyn_estimator.tools.trial.run import parallel_map, parse_seeds, simulate
 from rozyn_estimator.tools.trial.spec import TrialSpec

@@ -9,11 +9,11 @@ from collections.abc import Callable
 
 import numpy as np
 
-from rozyn_estimator.method.full.grid import expected_periodogram_m2
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum
-from rozyn_estimator.method.full.whittle import WhittleObjective, scoring
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.spectra import Spectra, taper_window
+from rozyn_estimator.method.vehicle_fit.grid import expected_periodogram_m2
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
+from rozyn_estimator.method.vehicle_fit.whittle import WhittleObjective, scoring
 
 GROUP_HZ = 0.02  # the fit's periodogram means span at most this (:mod:`.refine`'s docstring)
 _COARSE_HZ = 0.1  # a cold start's first fit: means over this (:func:`coarse_fit`)

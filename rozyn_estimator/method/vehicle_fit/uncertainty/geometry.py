@@ -25,8 +25,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum, herm
 from rozyn_estimator.method.likelihood.road_input import delay_slope, track_coherence
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum, herm
 from rozyn_estimator.vehicle_full import FullVehicle
 
 GEOMETRY = ("wheelbase_m", "track_front_m", "track_rear_m")

@@ -35,12 +35,12 @@ import numpy as np
 
 from rozyn_estimator.body_model import AnyVehicle
 from rozyn_estimator.method.budget import Calibration
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum
-from rozyn_estimator.method.full.uncertainty import corners, sensing
-from rozyn_estimator.method.full.uncertainty.corners import CornerCalibrating
-from rozyn_estimator.method.full.uncertainty.moves import axle_of
-from rozyn_estimator.method.full.whittle import WhittleObjective, ridged, scoring
 from rozyn_estimator.method.likelihood.guards import aground, backtracked
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
+from rozyn_estimator.method.vehicle_fit.uncertainty import corners, sensing
+from rozyn_estimator.method.vehicle_fit.uncertainty.corners import CornerCalibrating
+from rozyn_estimator.method.vehicle_fit.uncertainty.moves import axle_of
+from rozyn_estimator.method.vehicle_fit.whittle import WhittleObjective, ridged, scoring
 
 _FAR = 3.0  # a step longer than this many posterior std: beyond the linear range
 # a cold fit's Newton decrement at which it may hand over to the calibration: every combination

@@ -24,11 +24,11 @@ import math
 
 import numpy as np
 
-from rozyn_estimator.method.full.whittle import WhittleObjective
 from rozyn_estimator.method.likelihood.fitcheck import ALPHA, FITS, NOT_COMPUTABLE, ModelFit, misfit
 from rozyn_estimator.method.likelihood.guards import NOISE_AT_ZERO
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power
 from rozyn_estimator.method.likelihood.whiteness import whiteness
+from rozyn_estimator.method.vehicle_fit.whittle import WhittleObjective
 
 
 def full_model_fit(objective: WhittleObjective, theta: np.ndarray, spectra: Spectra, step: int,

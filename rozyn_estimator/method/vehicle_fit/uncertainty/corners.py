@@ -1,7 +1,7 @@
 """The full car's corner values as the data may calibrate them: each toleranced axle's springs,
 dampers, tyres and unsprung masses and each anti-roll bar, as a share of the vehicle file's
 value (as the tolerances state them and both budgets move them:
-:func:`~rozyn_estimator.method.full.uncertainty.moves.vehicle_moves`, an axle's share on both its
+:func:`~rozyn_estimator.method.vehicle_fit.uncertainty.moves.vehicle_moves`, an axle's share on both its
 corners).
 
 :class:`CornerCalibrating` adds those shares to a :class:`~.spectrum.VehicleSpectrum`'s θ
@@ -18,8 +18,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from rozyn_estimator.body_model import AnyVehicle
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum
-from rozyn_estimator.method.full.uncertainty.moves import values_of, vehicle_moves
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
+from rozyn_estimator.method.vehicle_fit.uncertainty.moves import values_of, vehicle_moves
 
 PREFIXES = ("suspension_stiffness", "suspension_damping", "tyre_stiffness", "tyre_damping", "unsprung_mass",
             "anti_roll_stiffness")

@@ -17,7 +17,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from rozyn_estimator.body_model import AnyVehicle, corners_of
-from rozyn_estimator.method.full.corner_matrices import CORNER_VALUES
+from rozyn_estimator.method.vehicle_fit.corner_matrices import CORNER_VALUES
 from rozyn_estimator.tolerances import HEIGHT_KEYS
 from rozyn_estimator.vehicle_full import FullVehicle
 
@@ -61,7 +61,7 @@ def sensor_fields(v: AnyVehicle) -> tuple[str, ...]:
 def values_of(v: AnyVehicle) -> np.ndarray:
     """The corner values, flat: each corner's (suspension stiffness, damping, tyre stiffness,
     damping, unsprung mass) by quantity, then the full car's bars [N m/rad] (the directions of
-    :func:`~rozyn_estimator.method.full.corner_matrices.corner_response_derivatives`)."""
+    :func:`~rozyn_estimator.method.vehicle_fit.corner_matrices.corner_response_derivatives`)."""
     c = corners_of(v)
     bars = [v.anti_roll_stiffness_front_nmprad, v.anti_roll_stiffness_rear_nmprad] \
         if isinstance(v, FullVehicle) else []

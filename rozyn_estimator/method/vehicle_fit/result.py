@@ -6,10 +6,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rozyn_estimator.method.full.uncertainty.calibrate import VehicleCalibration
 from rozyn_estimator.method.likelihood.fitcheck import ModelFit
 from rozyn_estimator.method.likelihood.score import SandwichRatio
 from rozyn_estimator.method.refinement import LikelihoodResult
+from rozyn_estimator.method.vehicle_fit.uncertainty.calibrate import VehicleCalibration
 
 
 @dataclass(frozen=True)

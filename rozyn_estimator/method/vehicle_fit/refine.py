@@ -55,23 +55,6 @@ import numpy as np
 from scipy.optimize import OptimizeResult
 
 from rozyn_estimator.body_model import AnyVehicle, corners_of, rolls
-from rozyn_estimator.method.full.fitcheck import full_model_fit
-from rozyn_estimator.method.full.intermittency import variance_factors
-from rozyn_estimator.method.full.means import GROUP_HZ, coarse_fit, grouped, kernel_m2
-from rozyn_estimator.method.full.result import Refinement
-from rozyn_estimator.method.full.score import sandwich_ratio
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum
-from rozyn_estimator.method.full.speed import check_full_speed, speed_models
-from rozyn_estimator.method.full.uncertainty.calibrate import (
-    HANDOFF,
-    Posterior,
-    VehicleCalibration,
-    calibrate_vehicle,
-    sensor_groups,
-)
-from rozyn_estimator.method.full.uncertainty.corners import corner_keys
-from rozyn_estimator.method.full.uncertainty.refine_budget import refinement_contributions
-from rozyn_estimator.method.full.whittle import WhittleObjective, ridged, scoring
 from rozyn_estimator.method.information import information_lost
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.fitcheck import neighbour_correlation, unsteady_fit
@@ -79,6 +62,23 @@ from rozyn_estimator.method.likelihood.guards import NOISE_AT_ZERO, aground, sin
 from rozyn_estimator.method.likelihood.road_input import steady_window, unsteady, window_weights
 from rozyn_estimator.method.likelihood.score import SandwichRatio
 from rozyn_estimator.method.likelihood.spectra import Spectra, band_power, window_spectra
+from rozyn_estimator.method.vehicle_fit.fitcheck import full_model_fit
+from rozyn_estimator.method.vehicle_fit.intermittency import variance_factors
+from rozyn_estimator.method.vehicle_fit.means import GROUP_HZ, coarse_fit, grouped, kernel_m2
+from rozyn_estimator.method.vehicle_fit.result import Refinement
+from rozyn_estimator.method.vehicle_fit.score import sandwich_ratio
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
+from rozyn_estimator.method.vehicle_fit.speed import check_full_speed, speed_models
+from rozyn_estimator.method.vehicle_fit.uncertainty.calibrate import (
+    HANDOFF,
+    Posterior,
+    VehicleCalibration,
+    calibrate_vehicle,
+    sensor_groups,
+)
+from rozyn_estimator.method.vehicle_fit.uncertainty.corners import corner_keys
+from rozyn_estimator.method.vehicle_fit.uncertainty.refine_budget import refinement_contributions
+from rozyn_estimator.method.vehicle_fit.whittle import WhittleObjective, ridged, scoring
 
 _MIN_NOISE = 1e-9  # the model's fixed white floor, share of each channel's band power
 _FIRST_ITERATIONS = 25  # the first start's share of max_iter when a second may follow (noisy data: 3-15)

@@ -37,9 +37,6 @@ from scipy import sparse
 from rozyn_estimator.body_model import AnyVehicle, channel_rows, corners_of, rolls
 from rozyn_estimator.gravity import gravity_height_m
 from rozyn_estimator.method.body_parameters import BodyParameters
-from rozyn_estimator.method.full.corner_matrices import corner_matrices, corner_response_derivatives
-from rozyn_estimator.method.full.grid import ALIAS_SPACING_HZ, alias_map, apply, evaluation_map
-from rozyn_estimator.method.full.uncertainty import sensing as sensor_model
 from rozyn_estimator.method.likelihood.road_input import (
     delay_characteristic,
     driving_speed,
@@ -48,6 +45,9 @@ from rozyn_estimator.method.likelihood.road_input import (
     track_coherence,
     track_mixture,
 )
+from rozyn_estimator.method.vehicle_fit.corner_matrices import corner_matrices, corner_response_derivatives
+from rozyn_estimator.method.vehicle_fit.grid import ALIAS_SPACING_HZ, alias_map, apply, evaluation_map
+from rozyn_estimator.method.vehicle_fit.uncertainty import sensing as sensor_model
 from rozyn_estimator.vehicle_full import FullVehicle
 
 

@@ -7,10 +7,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum
-from rozyn_estimator.method.full.whittle import WhittleObjective, scoring
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.speedcheck import SpeedCheck, check_speed
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
+from rozyn_estimator.method.vehicle_fit.whittle import WhittleObjective, scoring
 
 
 def speed_models(model: VehicleSpectrum) -> Callable[[float], VehicleSpectrum]:

@@ -5,13 +5,13 @@ An assumed value ``β`` off by ``δ`` moves the likelihood's optimum by
 fitted parameters and ``β`` (the expected score's slope in ``β``: the fit absorbs what it can
 of the changed spectrum into θ, the nuisances included). ``∂_β S``: for the corners' values
 (springs, dampers, tyres, unsprung masses, bars) and the sensors' positions, gains and
-timing the model's analytic derivatives (:class:`~rozyn_estimator.method.full.spectrum.
+timing the model's analytic derivatives (:class:`~rozyn_estimator.method.vehicle_fit.spectrum.
 VehicleSpectrum`'s ``corner_derivatives`` and ``sensing_derivatives``, and for the wheelbase
 and tracks :func:`~.geometry.geometry_derivatives`, each in one pass); for any other value the
 model's change with the value moved a small step.
 Per toleranced value: that move times its tolerance,
 mapped to ``(m, I_xx, I_yy, l_f, y_c)``. The keys follow the Rozyn stage's budget
-(:func:`rozyn_estimator.method.full.uncertainty.moves.vehicle_moves`): an axle's share applies
+(:func:`rozyn_estimator.method.vehicle_fit.uncertainty.moves.vehicle_moves`): an axle's share applies
 to both its corners,
 a sensor's position or gain to each sensor on its own (independent errors: one
 contribution each), the time offset to the rear sensors against the front ones.
@@ -33,9 +33,9 @@ from collections.abc import Callable
 import numpy as np
 
 from rozyn_estimator.body_model import AnyVehicle
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum
-from rozyn_estimator.method.full.uncertainty.geometry import GEOMETRY, geometry_derivatives
-from rozyn_estimator.method.full.uncertainty.moves import (
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
+from rozyn_estimator.method.vehicle_fit.uncertainty.geometry import GEOMETRY, geometry_derivatives
+from rozyn_estimator.method.vehicle_fit.uncertainty.moves import (
     ABS_STEP,
     VehicleMove,
     axle_channels,
@@ -45,7 +45,7 @@ from rozyn_estimator.method.full.uncertainty.moves import (
     values_of,
     vehicle_moves,
 )
-from rozyn_estimator.method.full.whittle import WhittleObjective
+from rozyn_estimator.method.vehicle_fit.whittle import WhittleObjective
 from rozyn_estimator.vehicle_full import FullVehicle
 
 # a move: the step -> (the vehicle moved, a factor per channel (F, k) or None)

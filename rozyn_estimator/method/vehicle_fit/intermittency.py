@@ -44,10 +44,10 @@ from __future__ import annotations
 import numpy as np
 from scipy import fft as sfft
 
-from rozyn_estimator.method.full.score import spectrum_itself
-from rozyn_estimator.method.full.stretches import Stretches, drive_stretches, pairs, stretched_factors
-from rozyn_estimator.method.full.whittle import WhittleObjective
 from rozyn_estimator.method.likelihood.spectra import Spectra
+from rozyn_estimator.method.vehicle_fit.score import spectrum_itself
+from rozyn_estimator.method.vehicle_fit.stretches import Stretches, drive_stretches, pairs, stretched_factors
+from rozyn_estimator.method.vehicle_fit.whittle import WhittleObjective
 
 
 def variance_factors(objective: WhittleObjective, theta: np.ndarray, combos: np.ndarray, spectra: Spectra,

@@ -15,7 +15,7 @@ import math
 import numpy as np
 from scipy.optimize import OptimizeResult, minimize
 
-from rozyn_estimator.method.full.spectrum import VehicleSpectrum, herm
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum, herm
 
 _HESSIAN_STEP = 3  # the optimiser's Fisher information: every 3rd frequency (class docstring)
 _HESSIAN_MIN = 300  # ... of models with at least this many frequencies
