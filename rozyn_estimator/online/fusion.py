@@ -19,10 +19,13 @@ driving after a stop (``min_window_fill`` of ``window_s``) estimates from the dr
 alone (:meth:`Fusion.test_cut`), a probe that is fused only where it found a change (a window
 that begins as the vehicle pulls away reads the body a little less well: fused, such windows
 took the half hour's I_yy from -0.5 to -0.9 %). At ``p <`` :data:`CHANGE_P` the load changed
-at that stop: the fusion restarts from the windows after it (a window still reaching back
-over the stop publishes the estimate since it), the event is reported (``load changed at the stop at t =
-…: m 1000 → 1150 kg``) and counted. Until that window arrives the windows reaching over the
-stop are fused as any other (they hold both loads, which only the test can tell).
+at that stop — or, where the window holds later stops (in town it usually does), at one of
+them: the window reads the old load up to the one where it changed. The fusion restarts from
+the windows after the last stop the window holds (a window still reaching back over it
+publishes the estimate since it), the event is reported (``load changed at the stop at t = …:
+m 1000 → 1150 kg``, or ``at one of the stops from t = … to …``) and counted. Until that window
+arrives the windows reaching over the stop are fused as any other (they hold both loads, which
+only the test can tell).
 
 What fusing cannot reduce: a varying drive's model (the mixture of local spectra,
 :mod:`~rozyn_estimator.method.likelihood.road_input`) is an approximation, which on urban windows
@@ -80,17 +83,21 @@ class Chain:
 
 @dataclass(frozen=True)
 class LoadChange:
-    """A detected change: the stop's start [ns], the mass before and after [kg], the test's p."""
+    """A detected change: the stop's start [ns], the mass before and after [kg], the test's p; where
+    the window tested held later stops, the last one's start (the load changed at one of them)."""
 
     stop_ns: int
     mass_before_kg: float
     mass_after_kg: float
     p_value: float
+    last_stop_ns: int | None = None
 
     def text(self) -> str:
         p = f"p = {self.p_value:.1g}" if self.p_value >= 1e-9 else "p < 1e-9"
-        return (f"load changed at the stop at t = {self.stop_ns / NS:.1f} s: m {self.mass_before_kg:.0f} -> "
-                f"{self.mass_after_kg:.0f} kg ({p})")
+        last = self.stop_ns if self.last_stop_ns is None else self.last_stop_ns
+        where = f"the stop at t = {self.stop_ns / NS:.1f} s" if last == self.stop_ns else \
+            f"one of the stops from t = {self.stop_ns / NS:.1f} s to {last / NS:.1f} s"
+        return f"load changed at {where}: m {self.mass_before_kg:.0f} -> {self.mass_after_kg:.0f} kg ({p})"
 
 
 def statistical_covariance(est: Estimate) -> np.ndarray | None:
@@ -197,8 +204,10 @@ class Fusion:
         return max(done, key=lambda c: (c.windows, c.hi_ns)) if done else None
 
     def _test_stops(self, est: Estimate, stat: np.ndarray, lo_ns: int) -> None:
-        """Test each stop this window lies wholly after; restart at one where the load changed."""
+        """Test each stop this window lies wholly after; restart where the load changed."""
         for start in sorted(s for s, end in self._stops.items() if end <= lo_ns):
+            if start not in self._stops:  # in a window that found a change (below)
+                continue
             end = self._stops.pop(start)
             self._tested.add(start)
             before = self._best(start)
@@ -214,10 +223,15 @@ class Fusion:
                 continue
             p = float(chi2.sf(z2, d.size))
             if p < CHANGE_P:
-                self.changes.append(LoadChange(start, float(before.mean[0]), float(est.params[0]), p))
+                # stops within the window: the load may have changed at one of them instead, so
+                # only the driving after the last is surely the new load's
+                inside = sorted((s, e) for s, e in self._stops.items() if s >= lo_ns)
+                last, end = inside[-1] if inside else (start, end)
+                self.changes.append(LoadChange(start, float(before.mean[0]), float(est.params[0]), p, last))
+                self._tested.update(s for s, _ in inside)
                 self._restart_ns = end - 1
                 self._chains = []
-                self._stops = {s: e for s, e in self._stops.items() if s > start}
+                self._stops = {s: e for s, e in self._stops.items() if s > last}
 
 
 def _published(est: Estimate, chain: Chain) -> Estimate:
