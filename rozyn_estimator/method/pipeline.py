@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from rozyn_estimator.body_model import AnyVehicle, rolls
-from rozyn_estimator.method.budget import Budget, rozyn_contributions
+from rozyn_estimator.method.budget import Budget, Calibration, rozyn_contributions
 from rozyn_estimator.method.config import FULL_PARAM_NAMES, PARAM_NAMES, PipelineConfig
 from rozyn_estimator.method.drive import constant_speed_only, varying_drive, window_speed
 from rozyn_estimator.method.fit import characteristic_matrix, corner_shapes
@@ -193,8 +193,7 @@ def _rozyn_stage(y: np.ndarray, fs_hz: float, vehicle: AnyVehicle, cfg: Pipeline
     except (InputError, IdentificationError, np.linalg.LinAlgError) as exc:
         return _failed(str(exc), n, started, base)
     return Estimate(status="ok", params=params, covariance=cov, modes=modes, a0=_a0(v, modes, index),
-                    n_samples=n,
-                    elapsed_ms=(time.perf_counter() - started) * 1e3, notes=notes, **base)
+                    n_samples=n, elapsed_ms=(time.perf_counter() - started) * 1e3, notes=notes, **base)
 
 
 def _a0(v: AnyVehicle, modes: tuple[Mode, ...], index: tuple[int, ...]) -> np.ndarray | None:
@@ -275,7 +274,8 @@ def _warm(warm_start: Estimate | np.ndarray | None) -> Refinement | None:
 
 
 def _budget(statistical: np.ndarray | None, contributions: dict[str, np.ndarray], names: tuple[str, ...],
-            calibration: tuple[Any, ...] = (), varying: dict[str, np.ndarray] | None = None) -> Budget | None:
+            calibration: tuple[Calibration, ...] = (),
+            varying: dict[str, np.ndarray] | None = None) -> Budget | None:
     """The budget of a stage's estimate (None without a covariance or without tolerances)."""
     if statistical is None or not (contributions or calibration):
         return None
