@@ -88,9 +88,15 @@ class Estimate:
         return None if self.covariance is None else np.sqrt(np.diag(self.covariance))
 
     @property
+    def statistical_covariance(self) -> np.ndarray | None:
+        """The statistical part alone (the data's; the tolerances' excluded): the budget's, else
+        the whole covariance."""
+        return self.budget.statistical if self.budget is not None else self.covariance
+
+    @property
     def statistical_std(self) -> np.ndarray | None:
-        """The std of the statistical part alone (the data's; the tolerances' excluded)."""
-        cov = self.budget.statistical if self.budget is not None else self.covariance
+        """The std of :attr:`statistical_covariance`."""
+        cov = self.statistical_covariance
         return None if cov is None else np.sqrt(np.diag(cov))
 
     def to_dict(self) -> dict[str, Any]:

@@ -100,13 +100,6 @@ class LoadChange:
         return f"load changed at {where}: m {self.mass_before_kg:.0f} -> {self.mass_after_kg:.0f} kg ({p})"
 
 
-def statistical_covariance(est: Estimate) -> np.ndarray | None:
-    """The estimate's statistical covariance (its budget's, else its whole covariance)."""
-    if est.budget is not None:
-        return np.asarray(est.budget.statistical)
-    return None if est.covariance is None else np.asarray(est.covariance)
-
-
 def stops_in(speed: tuple[np.ndarray, np.ndarray], threshold_mps: float,
              min_stop_s: float = MIN_STOP_S) -> list[tuple[int, int]]:
     """The complete stops in a window's speed samples: (first standing, first driving again) [ns]
@@ -155,7 +148,7 @@ class Fusion:
         the complete stops in it given, ``unsteady`` a stop-and-go window; a ``probe`` (cut to
         a stop's end: :meth:`test_cut`) is fused only where it found a change (see the module)."""
         self._register(stops)
-        stat = statistical_covariance(est)
+        stat = est.statistical_covariance
         if stat is None or est.params is None or not np.all(np.isfinite(stat)):
             return est
         try:
@@ -288,4 +281,4 @@ def fuse_update(fusion: Fusion, update: Update, job: Job, driving_mps: float, wh
 
 
 __all__ = ["CHANGE_P", "DRIVE_MODEL_FLOOR", "MIN_STOP_S", "Chain", "Fusion", "LoadChange", "fuse_update",
-           "statistical_covariance", "stops_in", "trimmed"]
+           "stops_in", "trimmed"]
