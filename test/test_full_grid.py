@@ -96,6 +96,31 @@ def test_the_gradient_through_the_adjoint_is_the_slope_of_the_likelihood():
         assert grad[i] == pytest.approx(slope, rel=1e-4, abs=1e-6 * np.abs(grad).max()), i
 
 
+def test_a_floors_levels_scored_together_are_the_likelihood_at_each():
+    """floor_values' rank-one updates give ℓ as a fresh evaluation at each floor does, with a
+    prior on the floor counted, and inf where S would not be positive definite."""
+    model, theta = _model_and_theta(0.05)
+    S, _ = model.spectrum(theta, derivatives=False)
+    rng = np.random.default_rng(5)
+    x = rng.standard_normal((S.shape[0], 4, 8)) + 1j * rng.standard_normal((S.shape[0], 4, 8))
+    periodogram = S @ (x @ x.conj().swapaxes(1, 2) / 8) @ S / np.trace(S, axis1=1, axis2=2)[:, None, None]
+    precision = np.zeros(model.n_params)
+    precision[model.noise_slice.start + 2] = 0.5
+    objective = WhittleObjective(model, periodogram, np.full(S.shape[0], 2.0), precision)
+    floors = np.array([1e-9, 1e-7, 1e-5, 1e-3])
+    for channel in (0, 2):
+        fast = objective.floor_values(theta, channel, floors, model.noise_slice.start + channel)
+        exact = []
+        for floor in floors:
+            trial = theta.copy()
+            trial[model.noise_slice.start + channel] = np.log(floor)
+            exact.append(objective.fun(trial))
+        np.testing.assert_allclose(fast, exact, rtol=1e-9)
+    # a floor S cannot take
+    below = objective.floor_values(theta, 1, np.array([-1.0]), model.noise_slice.start + 1)
+    assert not np.isfinite(below[0])
+
+
 def test_the_optimisers_hessian_is_the_fisher_information_within_a_few_percent():
     model, theta = _model_and_theta(0.05)
     S, _ = model.spectrum(theta, derivatives=False)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import Protocol
 
 import numpy as np
 
@@ -20,8 +21,18 @@ _PROBE_SHARE = 1e-2
 _REVIVE_SHARES = 10.0 ** np.arange(-8, 0)  # the floors tried for one run aground, share of its power
 
 
-def aground(fun: Callable[[np.ndarray], float], jac: Callable[[np.ndarray], np.ndarray],
-            theta: np.ndarray, value: float, noise: slice, power: np.ndarray) -> np.ndarray | None:
+class FloorProbe(Protocol):
+    """What :func:`aground` asks of an objective (the Whittle objective's methods)."""
+
+    def fun(self, theta: np.ndarray) -> float: ...
+
+    def jac(self, theta: np.ndarray) -> np.ndarray: ...
+
+    def floor_values(self, theta: np.ndarray, channel: int, floors: np.ndarray, at: int) -> np.ndarray: ...
+
+
+def aground(objective: FloorProbe, theta: np.ndarray, value: float, noise: slice,
+            power: np.ndarray) -> np.ndarray | None:
     """A start for a fit whose noise floor ran aground: θ with that floor at the best of a few
     levels, where that beats the fit's optimum ``value`` at ``theta`` (else None).
 
@@ -31,19 +42,23 @@ def aground(fun: Callable[[np.ndarray], float], jac: Callable[[np.ndarray], np.n
     rightly warns). Such a floor's likelihood still falls as the floor itself grows (the
     gradient in the floor, not its log, is negative where raising it to :data:`_PROBE_SHARE`
     of its channel's power would gain a nat): only those are tried, so noise-free data cost
-    one gradient."""
+    one gradient. The levels are scored together from the evaluation at θ
+    (``floor_values``); the one chosen is evaluated afresh, and is where the fit goes on."""
     floors = np.exp(theta[noise])
     with np.errstate(divide="ignore", invalid="ignore"):
-        slope = jac(theta)[noise] / floors  # ∂ℓ/∂n: the chain rule's factor n taken out
+        slope = objective.jac(theta)[noise] / floors  # ∂ℓ/∂n: the chain rule's factor n taken out
     stuck = np.flatnonzero((floors < 1e-4 * power) & (slope * _PROBE_SHARE * power < -1.0))
     start, best = None, value
     for i in stuck:
-        for share in _REVIVE_SHARES:
-            trial = theta.copy()
-            trial[noise.start + i] = math.log(share * power[i])
-            f = fun(trial)
-            if np.isfinite(f) and f < best:
-                start, best = trial, f
+        levels = _REVIVE_SHARES * power[i]
+        values = objective.floor_values(theta, int(i), levels, noise.start + int(i))
+        if not np.any(values < best):
+            continue
+        trial = theta.copy()
+        trial[noise.start + i] = math.log(levels[int(np.argmin(values))])
+        f = objective.fun(trial)
+        if np.isfinite(f) and f < best:
+            start, best = trial, f
     return start
 
 

@@ -194,7 +194,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
     if cfg.second_start and doubtful():
         run(_grid_start(model, objective, power, vehicle, cfg.noise_start), cfg.max_iter, cold=True)
     if cfg.second_start and best is not None and np.isfinite(best.fun):
-        revived = aground(objective.fun, objective.jac, best.x, best.fun, model.noise_slice, power)
+        revived = aground(objective, best.x, best.fun, model.noise_slice, power)
         if revived is not None:
             run(revived, max(1, cfg.max_iter - iterations))
     if best is not None and model.grid_hz > 0 and \
@@ -340,8 +340,7 @@ def _revived(objective: WhittleObjective, model: VehicleSpectrum, theta: np.ndar
     power and swing within their std, and a fit from a floor at 1e-10 walks its log back one
     trust radius at a time (12 iterations, measured)."""
     value = objective.fun(theta)
-    revived = aground(objective.fun, objective.jac, theta, value, model.noise_slice, power) \
-        if np.isfinite(value) else None
+    revived = aground(objective, theta, value, model.noise_slice, power) if np.isfinite(value) else None
     return theta if revived is None else revived
 
 

@@ -120,6 +120,27 @@ class WhittleObjective:
         linv = self._state[2]
         return linv @ self.periodogram @ herm(linv)
 
+    def floor_values(self, theta: np.ndarray, channel: int, floors: np.ndarray, at: int) -> np.ndarray:
+        """ℓ at θ with ``channel``'s noise floor (its log is ``θ[at]``) set to each of ``floors``
+        [(m/s²)²/Hz] (inf where S would not be positive definite), from the one evaluation at θ:
+        a floor adds a constant
+        to S's diagonal at every frequency (the interpolation and the smoothing keep constants),
+        so ``log det`` and ``tr(S⁻¹ I)`` follow by the rank-one update from ``(S⁻¹)_cc`` and
+        ``(S⁻¹ I S⁻¹)_cc`` (Sherman-Morrison): a probe of many floors for the price of none."""
+        value = self.fun(theta)
+        floors = np.asarray(floors, dtype=float)
+        if self._state is None:
+            return np.full(floors.shape, math.inf)
+        column = herm(self._state[2]) @ self._state[2][:, :, channel:channel + 1]  # S⁻¹'s column c
+        a = column[:, channel, 0].real
+        b = np.einsum("ka,kab,kb->k", column[..., 0].conj(), self.periodogram, column[..., 0]).real
+        delta = floors - math.exp(theta[at])
+        d = 1.0 + np.outer(delta, a)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            change = (np.log(d) - delta[:, None] * b / d) @ self.counts
+            change += 0.5 * self.precision[at] * (np.log(floors) ** 2 - theta[at] ** 2)
+        return np.where(np.all(d > 0, axis=1) & np.isfinite(change), value + change, math.inf)
+
     def fun(self, theta: np.ndarray) -> float:
         return self.evaluate(theta)[0]
 

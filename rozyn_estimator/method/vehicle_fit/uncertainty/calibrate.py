@@ -181,8 +181,8 @@ def calibrate_vehicle(
         # a floor that absorbed the departure and ran to its boundary does not come back by
         # scoring (no gradient there): revived as the fit's are (a rear sensor 5 ms late left
         # the front floor at zero and the half car's l_f 1.8 std off)
-        revived = None if power is None else aground(posterior.fun, posterior.jac, found.x, float(found.fun),
-                                                     base.noise_slice, power)
+        revived = None if power is None else aground(posterior, found.x, float(found.fun), base.noise_slice,
+                                                     power)
         if revived is not None:
             again = scoring(posterior, revived, _CONVERGED, max_iter)
             found = again if again.fun < found.fun else found
