@@ -99,7 +99,13 @@ def road_parts(objective: WhittleObjective, theta: np.ndarray, parts: np.ndarray
 
 def pairs(A: np.ndarray, left: np.ndarray, right: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """(q,) ``Σ_k c_k Re tr(A_k L_k A_k R_k)`` per direction (``left``, ``right``: (K, k, k))."""
-    return np.einsum("qkab,qkba,k->q", A @ left[None], A @ right[None], counts).real
+    return traced(A @ left[None], A @ right[None], counts)
+
+
+def traced(X: np.ndarray, Y: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """(q,) ``Σ_k c_k Re tr(X_k Y_k)`` of stacked products ``X = A L``, ``Y = A R`` (q, K, k, k):
+    each product formed once serves every pair it is in."""
+    return np.einsum("qkab,qkba->qk", X, Y).real @ counts
 
 
 def stretched_factors(objective: WhittleObjective, theta: np.ndarray, A: np.ndarray, total: np.ndarray,
@@ -115,13 +121,17 @@ def stretched_factors(objective: WhittleObjective, theta: np.ndarray, A: np.ndar
     unmasked = float(stretches.time.sum())
     local_noise = noise / unmasked  # the masked samples are zeroed, noise and all
     kappa = _road_kappa(local, local_noise, counts, kurtosis, stretches.flat)
-    n = local_noise[None]
-    noise_pairs = pairs(A, n, n, counts)
-    varied = sum(w * (kappa * pairs(A, r, r, counts) + 2.0 * pairs(A, r, n, counts) + noise_pairs)
-                 for w, r in zip(stretches.fourth, local, strict=True))
-    road = parts.sum(axis=0)
-    steady = pairs(A, road, road, counts) + 2.0 * pairs(A, road, noise[None], counts) + \
-        pairs(A, noise[None], noise[None], counts)
+    # A N for a diagonal N scales A's columns; A Ŝ_g once per stretch, and their weighted sum
+    # is A times the whole road part (the stretches sum to it)
+    a_noise = A * np.diagonal(local_noise)[None, None, None, :]
+    a_local = [A @ r[None] for r in local]
+    noise_pairs = traced(a_noise, a_noise, counts)
+    varied = sum(w * (kappa * traced(ar, ar, counts) + 2.0 * traced(ar, a_noise, counts) + noise_pairs)
+                 for w, ar in zip(stretches.fourth, a_local, strict=True))
+    a_road = sum(t * ar for t, ar in zip(stretches.time, a_local, strict=True))
+    a_all_noise = unmasked * a_noise
+    steady = traced(a_road, a_road, counts) + 2.0 * traced(a_road, a_all_noise, counts) + \
+        traced(a_all_noise, a_all_noise, counts)
     return np.maximum(1.0, 1.0 + (varied - steady) / np.where(total > 0, total, np.inf))
 
 
@@ -141,4 +151,4 @@ def _road_kappa(local: np.ndarray, local_noise: np.ndarray, counts: np.ndarray, 
     return float(max(1.0, np.sum(weights * per_channel) / weights.sum()))
 
 
-__all__ = ["GROUPS", "Stretches", "drive_stretches", "pairs", "road_parts", "stretched_factors"]
+__all__ = ["GROUPS", "Stretches", "drive_stretches", "pairs", "road_parts", "stretched_factors", "traced"]
