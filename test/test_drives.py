@@ -165,6 +165,33 @@ def test_an_urban_windows_floor_run_to_zero_is_revived_by_the_next_window():
     assert np.all(np.abs(held.params - usual.params) < 0.05 * std), (held.params - usual.params) / std
 
 
+def test_the_calibration_does_not_step_a_floor_at_zero():
+    """A floor at zero has no information, and the calibration's one scoring step must hold it:
+    from a warm start with the front floor at e^-28 (as a drive's chain of warm updates left it;
+    udds, seed 4, the window from 490 s: a stop, pulling away) the step put it at 10²⁸ times
+    the channel's power and the update failed ("explains the front channel as mostly noise")."""
+    sim = Simulation(SimConfig(drive_cycle_file="udds", road=GAUSSIAN, seed=4, noise_std_mps2=0.025))
+    block = sim.run(610.0)
+
+    def window(start_s: float) -> tuple[np.ndarray, np.ndarray]:
+        at = slice(int(start_s * 100), int((start_s + 120) * 100))
+        return block.accel_mps2[at], block.speed_mps[at]
+
+    cfg = PipelineConfig()
+    first = estimate(*window(485.0)[:1], 100.0, Vehicle(), cfg, window(485.0)[1])
+    assert first.ok, first.reason
+    theta = first.refinement.theta.copy()
+    theta[-2:] = -28.0, theta[-2:].max()
+    warm = dataclasses.replace(first, refinement=dataclasses.replace(first.refinement, theta=theta))
+    y, v = window(490.0)
+    usual = estimate(y, 100.0, Vehicle(), cfg, v, warm_start=first)
+    held = estimate(y, 100.0, Vehicle(), cfg, v, warm_start=warm)
+    assert usual.ok and held.ok, (usual.reason, held.reason)
+    std = np.sqrt(np.diag(usual.covariance))
+    assert np.all(np.abs(held.params - usual.params) < 0.05 * std), (held.params - usual.params) / std
+    assert max(held.refinement.noise_std_mps2) < 0.1  # m/s²: MEMS noise is 0.025
+
+
 def test_one_floor_at_zero_keeps_the_grid_while_the_road_leaves_s_regular():
     """S is singular only when more channels are noise-free than the road has inputs."""
     half = np.array([1e-9, 0.02])

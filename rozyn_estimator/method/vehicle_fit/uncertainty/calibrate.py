@@ -12,8 +12,9 @@ bent the body's parameters to explain it (24 kg·m², the budget said 11). Fitte
 priors, the values the data pin down are corrected and the rest keep their tolerances.
 
 From the fit's optimum (the new values at the model's assumed ones) one scoring step of the
-posterior when no value moves by more than ``_FAR`` posterior std (the one-step estimator),
-else the fit's trust-region optimiser to the mode. Corner values act on S nonlinearly: when
+posterior when no value moves by more than ``_FAR`` posterior std and no noise floor's log by
+more than ``_FLOOR_STEP`` (the one-step estimator; a floor at zero held), else the fit's
+trust-region optimiser to the mode. Corner values act on S nonlinearly: when
 the first step leaves the posterior short of its mode, a second scoring step from there (the
 trust region's first, without its check evaluation), or the optimiser when far short. The
 model then assumes the calibrated sensors (:class:`SensorCalibration`'s ``values``); what
@@ -35,7 +36,7 @@ import numpy as np
 
 from rozyn_estimator.body_model import AnyVehicle
 from rozyn_estimator.method.budget import Calibration
-from rozyn_estimator.method.likelihood.guards import aground, backtracked
+from rozyn_estimator.method.likelihood.guards import NOISE_AT_ZERO, aground, backtracked
 from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
 from rozyn_estimator.method.vehicle_fit.uncertainty import corners, sensing
 from rozyn_estimator.method.vehicle_fit.uncertainty.corners import CornerCalibrating
@@ -47,6 +48,10 @@ _FAR = 3.0  # a step longer than this many posterior std: beyond the linear rang
 # of its parameters is then within _FAR std of its optimum, the one-step estimator's range (a fine
 # fit's step or two saved; the estimates within 0.07 std of the posterior's mode, as before)
 HANDOFF = _FAR**2
+# a floor a small share of its channel's power is nearly flat in its log, and a step there is no
+# guide: the one step holds while no floor's log moves by more than this (100 km/h: at most 0.23;
+# urban windows: up to 190, the floor then 10⁸⁰ times its channel's power and the update failed)
+_FLOOR_STEP = 1.0
 _CONVERGED = 0.01  # Newton decrement at which the optimiser has found the mode
 _SECOND_STEP = 1.0  # after the first step, a decrement below this takes one more step, above it scoring
 _KEEP_MOVE = 0.01  # a warm update takes the calibration over while ln m, ln I, logit l_f, y_c [m] move less
@@ -158,10 +163,11 @@ def calibrate_vehicle(
     if not math.isfinite(value):
         raise ValueError("the calibration: the posterior is not finite at the fit's optimum")
     info = posterior.information(point)
-    inv = np.linalg.inv(ridged(info) + np.diag(precision))
-    step = -inv @ grad
+    held = _floors_at_zero(point, base.noise_slice, power)
+    step, std = _scoring_step(info, precision, grad, held)
     converged = True
-    near = bool(np.all(np.abs(step) <= _FAR * np.sqrt(np.abs(np.diag(inv)))))
+    near = bool(np.all(np.abs(step) <= _FAR * std)) and \
+        bool(np.all(np.abs(step[base.noise_slice]) <= _FLOOR_STEP))
     if near:  # the one-step estimator: the information at its start stands for the mode's
         point = point + step
     remaining = posterior.decrement(point) if near and corner_keys else 0.0
@@ -171,7 +177,7 @@ def calibrate_vehicle(
         # chord method's, with the first step's derivatives, left the estimates 0.35 std off)
         _, grad = posterior.evaluate(point)
         info = posterior.information(point)
-        second = point - np.linalg.solve(ridged(info) + np.diag(precision), grad)  # as the first step's
+        second = point + _scoring_step(info, precision, grad, held)[0]  # as the first step's
         point = second if _shares_valid(model, second) else point
     elif not near or remaining >= _SECOND_STEP:
         # far off: the nuisances that absorbed the departure (a noise floor) must move back, or
@@ -200,6 +206,29 @@ def calibrate_vehicle(
                                      corner_keys=corner_keys,
                                      corner_shares=fitted[n_sensor:].copy(), varying=varying)
     return point[:n], calibration, Posterior(posterior, point)
+
+
+def _floors_at_zero(point: np.ndarray, noise: slice, power: np.ndarray | None) -> np.ndarray:
+    """(len(point),) True at the noise floors the fit ran to zero (below :data:`NOISE_AT_ZERO` of
+    their channel's band power; none when ``power`` is not given)."""
+    held = np.zeros(point.size, dtype=bool)
+    if power is not None:
+        held[noise] = np.exp(point[noise]) < NOISE_AT_ZERO * np.asarray(power)
+    return held
+
+
+def _scoring_step(info: np.ndarray, precision: np.ndarray, grad: np.ndarray,
+                  held: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the posterior's scoring step, each coordinate's posterior std) with the ``held`` floors
+    still: a floor at zero is at its boundary, where the information on it vanishes, and a step
+    there extrapolates from nothing (an urban window's step put a floor at 10²⁸ times its
+    channel's power). Their std is 0."""
+    free = ~held
+    inv = np.linalg.inv((ridged(info) + np.diag(precision))[np.ix_(free, free)])
+    step, std = np.zeros(grad.size), np.zeros(grad.size)
+    step[free] = -inv @ grad[free]
+    std[free] = np.sqrt(np.abs(np.diag(inv)))
+    return step, std
 
 
 def _shares_valid(model: VehicleSpectrum | CornerCalibrating, point: np.ndarray) -> bool:
