@@ -13,7 +13,7 @@ from spectrum_helpers import assert_slopes, model_response, plant_response
 
 from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.method.pipeline import estimate
-from rozyn_estimator.method.vehicle_fit.refine import refine
+from rozyn_estimator.method.vehicle_fit.refine import _share_text, refine
 from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
 from rozyn_estimator.vehicle_full import FullTolerances, FullVehicle
 from sim_node.road import RoadSpec
@@ -188,3 +188,9 @@ def test_a_poor_start_calls_for_the_grids_start_and_the_better_optimum_wins():
     assert ref.params is not None and ref.covariance is not None
     z = (ref.params - _truth(EXACT)) / np.sqrt(np.diag(ref.covariance))
     assert np.all(np.abs(z) < 4), z
+
+
+def test_a_noise_share_reads_as_a_percent_or_as_times_when_far_beyond():
+    """A floor gone astray reads "7.7e+79 times", not eighty digits of percent."""
+    assert _share_text(0.654) == "65%"
+    assert _share_text(7.7e79) == "7.7e+79 times"

@@ -230,7 +230,8 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
     worst = int(np.argmax(share))
     if share[worst] > cfg.max_noise_share:
         raise _FitError(f"likelihood fit explains the {vehicle.channel_names[sensors[worst]]} channel as "
-                        f"mostly noise ({share[worst]:.0%} of its band power): a wrong basin or a bad sensor")
+                        f"mostly noise ({_share_text(share[worst])} of its band power): a wrong basin or a "
+                        "bad sensor")
     params = model.physical(theta)
     lf = params[model.body.lf_index]
     if not 1e-3 * vehicle.wheelbase_m < lf < (1 - 1e-3) * vehicle.wheelbase_m:
@@ -347,6 +348,11 @@ def _revived(objective: WhittleObjective, model: VehicleSpectrum, theta: np.ndar
 def _noise_share(theta: np.ndarray, model: VehicleSpectrum, power: np.ndarray) -> np.ndarray:
     """Each channel's fitted noise floor, share of its power in the band."""
     return np.exp(theta[model.noise_slice]) / power
+
+
+def _share_text(share: float) -> str:
+    """A noise floor's share of its channel's power for a message: percent, or times beyond 10."""
+    return f"{share:.0%}" if share < 10 else f"{share:.3g} times"
 
 
 def _physical(params: np.ndarray, model: VehicleSpectrum) -> bool:
