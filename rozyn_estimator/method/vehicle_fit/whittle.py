@@ -292,13 +292,21 @@ def ridged(m: np.ndarray) -> np.ndarray:
 
 
 def _inverse_cholesky(S: np.ndarray) -> np.ndarray | None:
-    """L⁻¹ of ``S = L Lᴴ`` per frequency; None unless every S is finite and positive definite."""
+    """L⁻¹ of ``S = L Lᴴ`` per frequency; None unless every S is finite and positive definite.
+
+    L⁻¹ by forward substitution over L's few rows, each step one vectorised product over
+    the frequencies: numpy's batched solve against the identity took 3x as long (1.5 against
+    0.5 ms for 1741 2x2 matrices, 3.7 against 1.3 ms for 4x4), a fifth of an evaluation."""
     if not np.all(np.isfinite(S)):
         return None
     try:
         L = np.linalg.cholesky(S)
     except np.linalg.LinAlgError:
         return None
-    eye = np.broadcast_to(np.eye(S.shape[-1]), S.shape)
-    return np.linalg.solve(L, eye)
-
+    inv = np.zeros_like(L)
+    diagonal = 1.0 / np.einsum("kaa->ka", L)
+    for i in range(L.shape[-1]):
+        inv[:, i, i] = diagonal[:, i]
+        for j in range(i):
+            inv[:, i, j] = -np.einsum("km,km->k", L[:, i, j:i], inv[:, j:i, j]) * diagonal[:, i]
+    return inv
