@@ -123,10 +123,10 @@ class WhittleObjective:
     def floor_values(self, theta: np.ndarray, channel: int, floors: np.ndarray, at: int) -> np.ndarray:
         """ℓ at θ with ``channel``'s noise floor (its log is ``θ[at]``) set to each of ``floors``
         [(m/s²)²/Hz] (inf where S would not be positive definite), from the one evaluation at θ:
-        a floor adds a constant
-        to S's diagonal at every frequency (the interpolation and the smoothing keep constants),
-        so ``log det`` and ``tr(S⁻¹ I)`` follow by the rank-one update from ``(S⁻¹)_cc`` and
-        ``(S⁻¹ I S⁻¹)_cc`` (Sherman-Morrison): a probe of many floors for the price of none."""
+        a floor adds a constant to S's diagonal at every frequency (the interpolation and the
+        smoothing keep constants), so ``log det`` and ``tr(S⁻¹ I)`` follow by the rank-one update
+        from ``(S⁻¹)_cc`` and ``(S⁻¹ I S⁻¹)_cc`` (Sherman-Morrison): a probe of many floors for
+        the price of none."""
         value = self.fun(theta)
         floors = np.asarray(floors, dtype=float)
         if self._state is None:

@@ -221,7 +221,7 @@ def _scoring_step(info: np.ndarray, precision: np.ndarray, grad: np.ndarray,
                   held: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(the posterior's scoring step, each coordinate's posterior std) with the ``held`` floors
     still: a floor at zero is at its boundary, where the information on it vanishes, and a step
-    there extrapolates from nothing (an urban window's step put a floor at 10²⁸ times its
+    there extrapolates from nothing (urban windows' steps put floors at up to 10⁸⁰ times their
     channel's power). Their std is 0."""
     free = ~held
     inv = np.linalg.inv((ridged(info) + np.diag(precision))[np.ix_(free, free)])
