@@ -60,7 +60,6 @@ MAX_CHAINS = 512  # chains kept since the last change (each an update's; the old
 DRIVE_MODEL_FLOOR = 0.003  # the varying drive's model: share of each value (of 1 m for the lateral CoG)
 
 
-
 @dataclass(frozen=True)
 class Chain:
     """Disjoint windows fused: their summed information and information-weighted estimates."""

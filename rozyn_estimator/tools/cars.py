@@ -21,12 +21,11 @@ from typing import Any
 
 import numpy as np
 
+from rozyn_estimator.body_model import AnyVehicle
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.method import METHODS
 from rozyn_estimator.vehicle import Vehicle, load_vehicle
 from rozyn_estimator.vehicle_full import FullVehicle, load_full_vehicle
-
-AnyVehicle = Vehicle | FullVehicle
 
 
 @dataclass(frozen=True)

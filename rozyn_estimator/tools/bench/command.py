@@ -161,13 +161,8 @@ def _warm_update(vehicle: Vehicle | FullVehicle) -> Callable[[], Any]:
     window = live.run(120.0).accel_mps2
     nxt = np.vstack([window[500:], live.run(5.0).accel_mps2])
     speed = live.config.speed_mps
-    if isinstance(vehicle, FullVehicle):
-        full = vehicle
-        warm_full = estimate(window, 100.0, full, PipelineConfig(), speed)
-        return lambda: estimate(nxt, 100.0, full, PipelineConfig(), speed, warm_start=warm_full)
-    half = vehicle
-    warm = estimate(window, 100.0, half, PipelineConfig(), speed)
-    return lambda: estimate(nxt, 100.0, half, PipelineConfig(), speed, warm_start=warm)
+    warm = estimate(window, 100.0, vehicle, PipelineConfig(), speed)
+    return lambda: estimate(nxt, 100.0, vehicle, PipelineConfig(), speed, warm_start=warm)
 
 
 def _peak_rss_mb() -> float:
