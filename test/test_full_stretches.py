@@ -85,3 +85,34 @@ def test_a_drive_at_two_speeds_raises_the_roll_more_than_the_heave(tmp_path, mon
     assert np.all(stretched >= 1.0), stretched
     assert stretched[1] > 1.2 * stretched[0] and stretched[4] > 1.2 * stretched[0], stretched
     assert np.all(published >= stretched - 1e-12) and np.any(published > stretched), (published, stretched)
+
+
+def test_the_factors_over_every_third_frequency_are_the_whole_sums(tmp_path, monkeypatch):
+    """The factors' sums run over the Fisher information's frequencies (every third, each
+    standing for its neighbours): they are smooth in frequency, so they agree with the sums over
+    every frequency (measured within 0.03 % on urban windows) at a third of the work."""
+    calls = []
+    real = intermittency.intermittency_factors
+
+    def spy(objective, *args, **kwargs):
+        calls.append((objective, args, kwargs))
+        return real(objective, *args, **kwargs)
+
+    monkeypatch.setattr(intermittency, "intermittency_factors", spy)
+    cycle = np.array([[0, 8.0], [55, 8.0], [58, 0.0], [66, 0.0], [72, 25.0], [130, 25.0]])
+    path = tmp_path / "two_speeds.csv"
+    path.write_text("time_s,speed_mps\n" + "".join(f"{t:g},{v:g}\n" for t, v in cycle))
+    sim = Simulation(SimConfig(model="full", full_vehicle=EXACT, road=RoadSpec(amplitudes="gaussian"),
+                               seed=7, drive_cycle_file=str(path)))
+    block = sim.run(120.0)
+    y = block.accel_mps2 + np.random.default_rng(7).standard_normal(block.accel_mps2.shape) * 0.02
+    _refined(block.speed_mps, y)
+    objective, args, kwargs = calls[-1]
+    at, counts = objective.sampled_frequencies()
+    assert at.size < 0.4 * objective.counts.size and counts.sum() == pytest.approx(objective.counts.sum())
+    sampled = real(objective, *args, **kwargs)
+    every = np.arange(objective.counts.size)
+    monkeypatch.setattr(objective, "sampled_frequencies", lambda: (every, objective.counts))
+    whole = real(objective, *args, **kwargs)
+    assert np.max(whole) > 1.1, whole  # the factors are not trivially one
+    np.testing.assert_allclose(sampled, whole, rtol=1e-3)

@@ -87,22 +87,23 @@ def intermittency_factors(objective: WhittleObjective, theta: np.ndarray, combos
     m4 = channel_kurtosis(samples, taper)
     if m4 is None:
         return np.ones(combos.shape[0])
-    A = objective.score_kernels(theta, combos)
-    S, _ = objective.factored(theta)
-    total = pairs(A, S, S, objective.counts)
+    at, counts = objective.sampled_frequencies()  # the sums are smooth in frequency, as the Fisher's
+    A = objective.score_kernels(theta, combos)[:, at]
+    S = objective.factored(theta)[0][at]
+    total = pairs(A, S, S, counts)
     kappa = _pooled(*channel_intermittency(m4, noise_share))
     steady = np.ones(combos.shape[0])
     if kappa > 1.0:
-        road = road_itself(objective, theta)
-        share = np.clip(pairs(A, road, road, objective.counts) / np.where(total > 0, total, np.inf), 0.0, 1.0)
+        road = road_itself(objective, theta, at)
+        share = np.clip(pairs(A, road, road, counts) / np.where(total > 0, total, np.inf), 0.0, 1.0)
         steady = 1.0 + (kappa - 1.0) * share
     if stretches is None:
         return steady
-    return np.maximum(steady, stretched_factors(objective, theta, A, total, m4, stretches))
+    return np.maximum(steady, stretched_factors(objective, theta, A, total, m4, stretches, at, counts))
 
 
-def road_itself(objective: WhittleObjective, theta: np.ndarray) -> np.ndarray:
-    """(K, k, k) S's road part itself at the fit's frequencies, not the periodogram's
+def road_itself(objective: WhittleObjective, theta: np.ndarray, at: np.ndarray | None = None) -> np.ndarray:
+    """(K, k, k) S's road part itself at the fit's frequencies (or those ``at``), not the periodogram's
     expectation: without the taper's and the groups' smoothing (``m₂ S''/2``), which puts
     some road power where the road itself has none (module docstring: why that part is no
     envelope's). The noise floors are white: S less its diagonal floors.
@@ -113,7 +114,9 @@ def road_itself(objective: WhittleObjective, theta: np.ndarray) -> np.ndarray:
     road, 100 km/h, 100 s, 40 roads each: the mass' error over its std had an rms of 1.32 on a
     second vehicle with the road itself, 1.13 with this; 1.02 and 0.91 on Table 5-1's)."""
     model = objective.model
-    S = spectrum_itself(objective, theta, model.freq_hz) if model.rolls else objective.factored(theta)[0]
+    at = np.arange(model.freq_hz.size) if at is None else at
+    S = spectrum_itself(objective, theta, model.freq_hz[at]) if model.rolls else \
+        objective.factored(theta)[0][at]
     return S - np.eye(model.k) * (np.exp(theta[model.noise_slice]) + model.min_noise_psd)
 
 

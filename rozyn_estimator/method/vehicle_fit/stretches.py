@@ -74,9 +74,11 @@ def drive_stretches(wheelbase_m: float, speed_mps: np.ndarray, fs_hz: float, sam
     return Stretches(parts, parts @ time, parts @ fourth, parts @ on_flat)
 
 
-def road_parts(objective: WhittleObjective, theta: np.ndarray, parts: np.ndarray) -> np.ndarray:
-    """(G, K, k, k) S's road part itself (no taper's smoothing) at the fit's frequencies from
-    each group of the mixture's delay bins alone, weighted as in the whole (the groups sum to it)."""
+def road_parts(objective: WhittleObjective, theta: np.ndarray, parts: np.ndarray,
+               at: np.ndarray | None = None) -> np.ndarray:
+    """(G, K, k, k) S's road part itself (no taper's smoothing) at the fit's frequencies (or those
+    ``at``) from each group of the mixture's delay bins alone, weighted as in the whole (the
+    groups sum to it)."""
     model: VehicleSpectrum = objective.model
     assert model.mixture is not None
     _, H, _, _, _ = model.body_motion(theta)
@@ -90,10 +92,12 @@ def road_parts(objective: WhittleObjective, theta: np.ndarray, parts: np.ndarray
         inputs = weight * (model.road_inputs(mix.coherence(scale)[0], delay=delay) if model.rolls else delay)
         nodes.append(model.fold(reads @ inputs @ herm(reads)))
     at_nodes = np.stack(nodes)
+    at = np.arange(model.freq_hz.size) if at is None else at
     if model.grid_hz <= 0:  # S at each frequency: the nodes are the targets, with one beyond each
-        return at_nodes if at_nodes.shape[1] == model.freq_hz.size else at_nodes[:, 1:-1]  # end to smooth
+        targets = at_nodes if at_nodes.shape[1] == model.freq_hz.size else at_nodes[:, 1:-1]  # end to smooth
+        return targets[:, at]
     first_node_hz = model.omega[0] / (2.0 * np.pi)
-    to_targets = lagrange_matrix((model.freq_hz - first_node_hz) / model.grid_hz, model.n_freq)
+    to_targets = lagrange_matrix((model.freq_hz[at] - first_node_hz) / model.grid_hz, model.n_freq)
     return apply(to_targets, at_nodes)
 
 
@@ -109,13 +113,16 @@ def traced(X: np.ndarray, Y: np.ndarray, counts: np.ndarray) -> np.ndarray:
 
 
 def stretched_factors(objective: WhittleObjective, theta: np.ndarray, A: np.ndarray, total: np.ndarray,
-                      kurtosis: np.ndarray, stretches: Stretches) -> np.ndarray:
+                      kurtosis: np.ndarray, stretches: Stretches, at: np.ndarray | None = None,
+                      counts: np.ndarray | None = None) -> np.ndarray:
     """(q,) the factors on the model's variances of the directions whose kernels are ``A``
     (``total`` their model variance ``Σ tr(A S A S)``), from the stretches' own spectra and the
-    road's intermittency left in the samples' ``kurtosis`` (k,) (module docstring); at least 1."""
+    road's intermittency left in the samples' ``kurtosis`` (k,) (module docstring); at least 1.
+    ``A`` and ``total`` are at the frequencies ``at`` (default: all), each standing for ``counts``
+    bins (default: the objective's)."""
     model = objective.model
-    counts = objective.counts
-    parts = road_parts(objective, theta, stretches.parts)  # (G, K, k, k)
+    counts = objective.counts if counts is None else counts
+    parts = road_parts(objective, theta, stretches.parts, at)  # (G, K, k, k)
     noise = np.eye(model.k) * (np.exp(theta[model.noise_slice]) + model.min_noise_psd)
     local = parts / stretches.time[:, None, None, None]  # Ŝ_g's road part
     unmasked = float(stretches.time.sum())

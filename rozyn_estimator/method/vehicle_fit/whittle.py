@@ -51,7 +51,8 @@ class WhittleObjective:
         self._root_counts = np.sqrt(self.counts)[:, None, None]
         n = periodogram.shape[0]
         self._sub = np.arange(0, n, _HESSIAN_STEP if n >= _HESSIAN_MIN else 1)
-        self._sub_root_counts = np.sqrt(np.add.reduceat(self.counts, self._sub))[:, None, None]
+        self._sub_counts = np.add.reduceat(self.counts, self._sub)
+        self._sub_root_counts = np.sqrt(self._sub_counts)[:, None, None]
         self._key: bytes | None = None
         self._value: tuple[float, np.ndarray] = (math.inf, np.zeros(model.n_params))
         self._state: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (S, dS at the nodes, L⁻¹)
@@ -248,14 +249,19 @@ class WhittleObjective:
             self._sampled_rows = self.sampled(dS_nodes, linv)
         return self._sampled_rows
 
+    def sampled_frequencies(self) -> tuple[np.ndarray, np.ndarray]:
+        """(indices, counts): :meth:`sampled_rows`' frequencies among the periodograms' and the bins
+        each stands for (its own and its neighbours'; every frequency of a short band)."""
+        return self._sub, self._sub_counts
+
     def sampled_model(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(S, dS/dθ, what each frequency counts for) over :meth:`sampled_rows`' frequencies."""
         S, _ = self.factored(theta)
         assert self._state is not None
         if self._sub.size == self.counts.size:
             return S, self.model.to_targets(self._state[1]), np.ravel(self.counts)
-        at = self._sub
-        return S[at], self.model.to_targets(self._state[1], at), np.ravel(self._sub_root_counts) ** 2
+        at, counts = self.sampled_frequencies()
+        return S[at], self.model.to_targets(self._state[1], at), counts
 
     def sampled(self, changes: np.ndarray, linv: np.ndarray) -> np.ndarray:
         """:meth:`whitened` rows of ``changes`` (p, nodes, k, k) of S at the model's nodes, over
