@@ -109,6 +109,7 @@ class _Watch:
         self.node = rclpy.create_node("bench_watch", context=self.ctx)
         self.values: dict[str, str] = {}
         self.pipeline_ms: dict[str, float] = {}  # update stamp -> the pipeline's own time
+        self.held: set[str] = set()  # stamps of updates at a stop (the last estimate republished)
         self.inertia: list[tuple[int, float]] = []  # (stamp, arrival wall time)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 10)
         self.node.create_subscription(InertiaStamped, "inertia", self._on_inertia, 10)
@@ -122,7 +123,9 @@ class _Watch:
         for s in msg.status:
             if s.name.endswith("estimator_node"):
                 self.values = {kv.key: kv.value for kv in s.values}
-                if "update_stamp" in self.values and "pipeline_ms" in self.values:
+                if self.values.get("held") == "true" and "update_stamp" in self.values:
+                    self.held.add(self.values["update_stamp"])
+                elif "update_stamp" in self.values and "pipeline_ms" in self.values:
                     self.pipeline_ms[self.values["update_stamp"]] = float(self.values["pipeline_ms"])
 
     def spin(self, seconds: float) -> None:
@@ -223,7 +226,9 @@ def bench_cpu_and_latency(domain: int, rate_hz: float, duration_s: float,
     own share of it (``pipeline_ms``: Rozyn's stage plus the refinement when on): over all
     updates, and (``*_full_window``) over those whose window is full (the steady state of a
     drive longer than the window; none unless ``duration_s`` exceeds it). With a drive ``cycle``
-    the node reads the publisher's speed topic (a varying drive: its windows hold driving)."""
+    the node reads the publisher's speed topic (a varying drive: its windows hold driving); the
+    updates at a stop, which republish the last estimate without computing (``held_updates``),
+    are left out of the medians."""
     # The publisher's road is driven at 100 km/h (or the cycle); the refinement needs the speed.
     # The default window and schedule (120 s, every 5 s), first update after 30 s.
     speed = ("speed_topic:=speed",) if cycle else (f"speed_mps:={100 / 3.6}",)
@@ -239,15 +244,16 @@ def bench_cpu_and_latency(domain: int, rate_hz: float, duration_s: float,
         cpu = _cpu_pct(est.pid, feed)
         watch.spin(2.0)
         published = dict(out["times"])
+        held = {round(float(stamp) * NS) for stamp in watch.held}
         lat = {stamp: (arrival - published[stamp]) * 1e3
-               for stamp, arrival in watch.inertia if stamp in published}
+               for stamp, arrival in watch.inertia if stamp in published and stamp not in held}
     finally:
         watch.close()
         _stop(est)
     pipe = {round(float(stamp) * NS): ms for stamp, ms in watch.pipeline_ms.items()}
     full = [stamp for stamp in lat if stamp - start_ns >= (WINDOW_S - 0.5) * NS]
     row = {"rate_hz_per_sensor": rate_hz, "refine": refine, **({"drive_cycle": cycle} if cycle else {}),
-           "cpu_pct": round(cpu, 1), "estimates": len(lat),
+           "cpu_pct": round(cpu, 1), "estimates": len(lat), **({"held_updates": len(held)} if cycle else {}),
            **_medians(lat, pipe, list(lat), ""),
            "update_latency_ms_max": round(max(lat.values()), 1) if lat else None,
            "taken": out["taken"], "published": out["sent"]}
