@@ -215,8 +215,10 @@ def half_car_channels(sensors: SensorSet, wheelbase_m: float) -> tuple[Channel, 
 FULL_CAR_MAX_CHANNELS = 4
 
 
-def same_positions(given: Any, placed: Sequence[float]) -> bool:
-    """A file's positions (a list) are the ones its sensors block places."""
+def same_positions(given: Any, placed: Sequence[float] | float) -> bool:
+    """A file's positions (a list, or one number) are the ones its sensors block places."""
+    if not isinstance(placed, Sequence):
+        given, placed = [given], [placed]
     try:
         return len(given) == len(placed) and all(abs(float(a) - b) <= 1e-9
                                                  for a, b in zip(given, placed, strict=True))

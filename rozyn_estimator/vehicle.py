@@ -13,23 +13,25 @@ to 0 (on the axles). Pitch ``phi`` is positive nose up, so a point at ``x`` move
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, ClassVar
 
 import yaml
 
-from rozyn_estimator.errors import ConfigError, RozynError
+from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.parameters import build, check, param, spec_of
 from rozyn_estimator.sensors import (
     Channel,
     SensorSet,
     half_car_channels,
+    same_positions,
     sensors_from_mapping,
     sensors_from_parameters,
 )
 from rozyn_estimator.tolerances import Tolerances
+from rozyn_estimator.yaml_file import load_yaml_file, one_line
 
 
 @dataclass(frozen=True)
@@ -185,32 +187,58 @@ FIELD_UNITS: Mapping[str, str] = {
 
 def vehicle_from_mapping(data: Mapping[str, Any], *, source: str = "vehicle") -> Vehicle:
     """Build a Vehicle from a mapping; unknown keys are refused (typos must not pass)."""
+    values, sensors = split_vehicle_mapping(data, source)
+    if values.get("model", "half") != "half":  # a full car's file says model: full (vehicle_full)
+        raise ConfigError(f"{source}: model: a half-car vehicle has model half, got "
+                          f"{one_line(repr(values['model']))} (full-car files are read by "
+                          "rozyn_estimator.vehicle_full.load_any_vehicle)")
+    values.pop("model", None)
+    return built_vehicle(Vehicle, Tolerances, values, sensors, FIELD_UNITS, "vehicle parameter(s)",
+                         ("sensor_front_offset_m", "sensor_rear_offset_m"), source)
+
+
+def split_vehicle_mapping(data: Any, source: str) -> tuple[dict[str, Any], SensorSet | None]:
+    """(the mapping's other keys, its ``sensors`` block read) of a vehicle file's mapping."""
     if not isinstance(data, Mapping):
         raise ConfigError(f"{source}: expected a mapping of vehicle parameters, got {type(data).__name__}")
     values = dict(data)
     sensors = sensors_from_mapping(values.pop("sensors"), source) if "sensors" in values else None
-    offsets = {k: values.pop(k) for k in ("sensor_front_offset_m", "sensor_rear_offset_m")
-               if sensors is not None and k in values}  # the block places them (a written file's agree)
-    model = values.pop("model", "half")  # a full car's file says model: full (rozyn_estimator.vehicle_full)
-    if model != "half":
-        raise ConfigError(f"{source}: model: a half-car vehicle has model half, got {one_line(repr(model))} "
-                          "(full-car files are read by rozyn_estimator.vehicle_full.load_any_vehicle)")
-    unknown = sorted(str(k) for k in set(values) - {*FIELD_UNITS, "tolerances"})
+    return values, sensors
+
+
+def built_vehicle(cls: Any, tolerances: Any, values: dict[str, Any], sensors: SensorSet | None,
+                  known: Mapping[str, str], what: str, positions: tuple[str, ...], source: str) -> Any:
+    """Either car's vehicle from a file's ``values`` (``model`` taken out) and ``sensors`` block.
+
+    Args:
+        cls: the vehicle class (:class:`Vehicle`, ``FullVehicle``).
+        tolerances: its tolerances' class (``from_mapping`` reads the ``tolerances`` key).
+        values: the file's keys but ``sensors`` and ``model``; unknown ones are refused.
+        sensors: the ``sensors`` block, which places the sensors (None: the fields do).
+        known: the keys ``values`` may hold besides ``tolerances`` (``cls``'s fields).
+        what: what the message calls the keys (``vehicle parameter(s)``).
+        positions: the fields the block places; a file may hold them too where they agree (a
+            written file's do).
+        source: the file, for messages.
+
+    Raises:
+        ConfigError: one line naming the file and the key.
+    """
+    given = {k: values.pop(k) for k in positions if sensors is not None and k in values}
+    unknown = sorted(str(k) for k in set(values) - {*known, "tolerances"})
     if unknown:
-        raise ConfigError(
-            f"{source}: unknown vehicle parameter(s) {_listed(unknown)}; "
-            f"known: {', '.join(FIELD_UNITS)}, tolerances"
-        )
+        raise ConfigError(f"{source}: unknown {what} {_listed(unknown)}; known: {', '.join(known)}, model, "
+                          "tolerances, sensors")
     try:
         if "tolerances" in values:
-            values["tolerances"] = Tolerances.from_mapping(values["tolerances"], source)
-        vehicle = Vehicle(**values)
+            values["tolerances"] = tolerances.from_mapping(values["tolerances"], source)
+        vehicle = cls(**values)
         if sensors is None:
             return vehicle
         placed = vehicle.with_sensors(sensors)
-        if any(not abs(float(v) - getattr(placed, k)) <= 1e-9 for k, v in offsets.items()):
+        if any(not same_positions(v, getattr(placed, k)) for k, v in given.items()):
             raise ConfigError(f"{source}: give the sensors' positions in the sensors block or as "
-                              "sensor_front_offset_m/sensor_rear_offset_m, not both")
+                              f"{'/'.join(positions)}, not both")
         return placed
     except ConfigError as exc:
         raise ConfigError(one_line(str(exc) if str(exc).startswith(source) else f"{source}: {exc}")) from None
@@ -223,112 +251,7 @@ def _listed(names: list[str], shown: int = 10) -> str:
     return ", ".join(cut) + more
 
 
-def one_line(text: str, limit: int = 2000) -> str:
-    """A message as one bounded line: what the user cannot see (newlines, control characters)
-    escaped, the end cut after ``limit`` characters (text from a file can be anything)."""
-    text = text[: 4 * limit]
-    text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
 MAX_VEHICLE_FILE_BYTES = 1 << 20  # a vehicle file is about 2 kB; a ROS 2 parameter file far below this
-MAX_YAML_DEPTH = 32  # nesting of mappings and sequences (a vehicle in a ROS 2 parameter file: 4)
-MAX_YAML_NODES = 200_000  # scalars, mappings and sequences, aliases counted as what they repeat
-_LOADER: Any = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's: 50x faster
-
-
-def load_yaml_file(path: Path, *, max_bytes: int, what: str, error: type[RozynError] = ConfigError) -> Any:
-    """A YAML file read safely: bounded in size, nesting and nodes, UTF-8 checked.
-
-    Malformed files (binary, not UTF-8, nested too deep to parse, a YAML bomb of
-    aliases, too large) are refused before they can take long or print much.
-
-    Args:
-        path: the file.
-        max_bytes: the largest file accepted.
-        what: what the file is, for messages (``vehicle file``).
-        error: the error type raised (:class:`ConfigError`, or the caller's).
-
-    Returns:
-        The document (None for an empty one).
-
-    Raises:
-        RozynError: ``error`` with one line naming the file and the problem.
-    """
-    name = one_line(str(path))
-    try:
-        with path.open("rb") as f:
-            raw = f.read(max_bytes + 1)
-    except OSError as exc:
-        raise error(f"{name}: cannot read {what}: {exc.strerror or exc}") from None
-    if len(raw) > max_bytes:
-        raise error(f"{name}: too large for a {what} (more than {max_bytes} bytes)")
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise error(f"{name}: not a {what}: not UTF-8 text (byte 0x{raw[exc.start]:02x} at position "
-                    f"{exc.start})") from None
-    try:
-        problem = _yaml_shape_problem(text)
-        data = None if problem else yaml.load(text, Loader=_LOADER)  # a safe loader
-    except (yaml.YAMLError, ValueError) as exc:  # ValueError: e.g. an integer of 5000 digits
-        raise error(f"{name}: not valid YAML: {_yaml_error(exc)}") from None
-    if problem:
-        raise error(f"{name}: refused as a {what}: {problem}")
-    return data
-
-
-def _yaml_error(exc: Exception) -> str:
-    """A YAML error on one line: what, and where (PyYAML's own text spans several lines)."""
-    if isinstance(exc, yaml.MarkedYAMLError):
-        mark = exc.problem_mark or exc.context_mark
-        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
-        text = ": ".join(str(part) for part in (exc.context, exc.problem) if part) + where
-    else:
-        text = " ".join(str(exc).split())
-    return one_line(text, 300)
-
-
-def _yaml_shape_problem(text: str) -> str | None:
-    """Why the document is refused unread: nested deeper than MAX_YAML_DEPTH, or more
-    than MAX_YAML_NODES nodes, aliases counted as the nodes they repeat (libyaml's parser
-    is iterative: the check cannot itself recurse). None when it may be read."""
-    depth: list[tuple[str | None, int]] = []  # the open collections: (anchor, nodes before)
-    sizes: dict[str, int] = {}  # anchor -> nodes under it
-    nodes = 0
-    for event in _events(text):
-        if event is None:
-            return f"nested deeper than {MAX_YAML_DEPTH} levels"
-        if isinstance(event, yaml.CollectionStartEvent):
-            depth.append((event.anchor, nodes))
-            nodes += 1
-            if len(depth) > MAX_YAML_DEPTH:
-                return f"nested deeper than {MAX_YAML_DEPTH} levels"
-        elif isinstance(event, yaml.CollectionEndEvent):
-            anchor, before = depth.pop()
-            if anchor is not None:
-                sizes[anchor] = nodes - before
-        elif isinstance(event, yaml.ScalarEvent):
-            nodes += 1
-            if event.anchor is not None:
-                sizes[event.anchor] = 1
-        elif isinstance(event, yaml.AliasEvent):
-            nodes += sizes.get(event.anchor or "", 1)
-        if nodes > MAX_YAML_NODES:
-            return f"more than {MAX_YAML_NODES} values (aliases counted as what they repeat)"
-    return None
-
-
-def _events(text: str) -> Iterator[yaml.Event | None]:
-    """``yaml.parse``'s events, then None where PyYAML (>= 6.0.4) refuses a nesting deeper
-    than its own limit: its scanner looks ahead of the events, so that limit can strike
-    before :func:`_yaml_shape_problem` has counted MAX_YAML_DEPTH levels."""
-    try:
-        yield from yaml.parse(text, Loader=_LOADER)
-    except yaml.MarkedYAMLError as exc:
-        if "nesting depth" not in str(exc.problem or ""):
-            raise
-        yield None
 
 
 def load_vehicle(path: str | Path) -> Vehicle:
@@ -364,7 +287,17 @@ def _vehicle_section(data: Any, source: str) -> Any:
 
 def dump_vehicle(v: Vehicle) -> str:
     """The vehicle as a flat YAML mapping with units as comments."""
-    lines = [f"{k}: {getattr(v, k)!r}  # {unit}" for k, unit in FIELD_UNITS.items()]
+    return dumped(v, FIELD_UNITS)
+
+
+def dumped(v: Any, units: Mapping[str, str], first: tuple[str, ...] = ()) -> str:
+    """Either car's vehicle as a flat YAML mapping: ``first`` lines, the fields of ``units``
+    (a per-corner tuple as a list) with their units as comments, the tolerances, the sensors block."""
+    lines = list(first)
+    for key, unit in units.items():
+        value = getattr(v, key)
+        shown = f"[{', '.join(repr(float(x)) for x in value)}]" if isinstance(value, tuple) else repr(value)
+        lines.append(f"{key}: {shown}  # {unit}")
     lines.append("tolerances:  # standard uncertainties: shares of the values, or m, or s")
     lines += [f"  {k}: {value!r}" for k, value in v.tolerances.to_dict().items()]
     text = "\n".join(lines) + "\n"

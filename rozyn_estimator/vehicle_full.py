@@ -36,16 +36,12 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, ClassVar
 
-import yaml
-
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.parameters import Param, build, check, param, spec_of
 from rozyn_estimator.sensors import (
     Channel,
     SensorSet,
     full_car_channels,
-    same_positions,
-    sensors_from_mapping,
     sensors_from_parameters,
 )
 from rozyn_estimator.tolerances import FullTolerances
@@ -53,13 +49,14 @@ from rozyn_estimator.vehicle import (
     HEIGHTS_RULE,
     MAX_VEHICLE_FILE_BYTES,
     Vehicle,
-    _listed,
     _vehicle_section,
-    load_yaml_file,
-    one_line,
+    built_vehicle,
+    dumped,
+    split_vehicle_mapping,
     vehicle_from_mapping,
     vehicle_from_parameters,
 )
+from rozyn_estimator.yaml_file import load_yaml_file, one_line
 
 CORNERS = ("front_left", "front_right", "rear_left", "rear_right")
 MODELS = ("half", "full")
@@ -289,32 +286,14 @@ def _axle_fields(pattern: str, values: tuple[float, float]) -> dict[str, Any]:
 
 def full_vehicle_from_mapping(data: Mapping[str, Any], *, source: str = "vehicle") -> FullVehicle:
     """Build a FullVehicle from a mapping (``model: full`` optional); unknown keys are refused."""
-    if not isinstance(data, Mapping):
-        raise ConfigError(f"{source}: expected a mapping of vehicle parameters, got {type(data).__name__}")
-    values = dict(data)
+    values, sensors = split_vehicle_mapping(data, source)
     model = values.pop("model", "full")
     if model != "full":
         raise ConfigError(f"{source}: model: expected full for a full-car vehicle, got "
                           f"{one_line(repr(model))}")
-    sensors = sensors_from_mapping(values.pop("sensors"), source) if "sensors" in values else None
-    slots = {k: values.pop(k) for k in ("sensor_x_m", "sensor_y_m")
-             if sensors is not None and k in values}  # the block places them (a written file's agree)
-    unknown = sorted(str(k) for k in set(values) - {*FULL_FIELD_UNITS, "tolerances"})
-    if unknown:
-        raise ConfigError(f"{source}: unknown full-car vehicle parameter(s) {_listed(unknown)}; known: "
-                          f"model, {', '.join(FULL_FIELD_UNITS)}, tolerances")
-    try:
-        if "tolerances" in values:
-            values["tolerances"] = FullTolerances.from_mapping(values["tolerances"], source)
-        if sensors is None:
-            return FullVehicle(**values)
-        placed = FullVehicle(**values).with_sensors(sensors)
-        if any(not same_positions(v, getattr(placed, k)) for k, v in slots.items()):
-            raise ConfigError(f"{source}: give the sensors' positions in the sensors block or as "
-                              "sensor_x_m/sensor_y_m, not both")
-        return placed
-    except ConfigError as exc:
-        raise ConfigError(one_line(str(exc) if str(exc).startswith(source) else f"{source}: {exc}")) from None
+    full: FullVehicle = built_vehicle(FullVehicle, FullTolerances, values, sensors, FULL_FIELD_UNITS,
+                                      "full-car vehicle parameter(s)", ("sensor_x_m", "sensor_y_m"), source)
+    return full
 
 
 def any_vehicle_from_mapping(data: Mapping[str, Any], *, source: str = "vehicle") -> Vehicle | FullVehicle:
@@ -386,16 +365,7 @@ def load_full_vehicle(path: str | Path) -> FullVehicle:
 
 def dump_full_vehicle(v: FullVehicle) -> str:
     """The vehicle as a flat YAML mapping (``model: full`` first) with units as comments."""
-    lines = ["model: full"]
-    for key, unit in FULL_FIELD_UNITS.items():
-        value = getattr(v, key)
-        shown = f"[{', '.join(repr(float(x)) for x in value)}]" if isinstance(value, tuple) else repr(value)
-        lines.append(f"{key}: {shown}  # {unit}")
-    lines.append("tolerances:  # standard uncertainties: shares of the values, or m, or s")
-    lines += [f"  {k}: {value!r}" for k, value in v.tolerances.to_dict().items()]
-    text = "\n".join(lines) + "\n"
-    block = {"sensors": v.sensors.to_dict()} if v.sensors is not None else None
-    return text if block is None else text + yaml.safe_dump(block, sort_keys=False)
+    return dumped(v, FULL_FIELD_UNITS, ("model: full",))
 
 
 __all__ = ["CORNERS", "FULL_FIELD_UNITS", "MODEL_PARAM", "FullTolerances", "FullVehicle",

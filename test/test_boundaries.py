@@ -19,7 +19,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PKG = "rozyn_estimator"
 SHARED = {f"{PKG}", f"{PKG}.errors", f"{PKG}.vehicle", f"{PKG}.vehicle_full", f"{PKG}.parameters",
-          f"{PKG}.tolerances", f"{PKG}.gravity", f"{PKG}.body_model", f"{PKG}.sensors"}
+          f"{PKG}.tolerances", f"{PKG}.gravity", f"{PKG}.body_model", f"{PKG}.sensors", f"{PKG}.yaml_file"}
 ROS_PACKAGES = {"rclpy", "builtin_interfaces", "diagnostic_msgs", "geometry_msgs", "sensor_msgs", "std_msgs",
                 "nav_msgs", "rcl_interfaces", "rosgraph_msgs"}
 # sub-package -> the project modules it may import (besides its own) and third-party ROS

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from rozyn_estimator.errors import ConfigError, RozynError
-from rozyn_estimator.vehicle import one_line
+from rozyn_estimator.yaml_file import one_line
 
 NS = 1_000_000_000
 # rosbags base type name -> (numpy dtype, size in bytes)

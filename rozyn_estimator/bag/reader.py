@@ -32,7 +32,7 @@ from rozyn_estimator.bag.source import MessageSource, RawBatch, TopicInfo, files
 from rozyn_estimator.bag.typestore import absolute_topic
 from rozyn_estimator.bag.writer import CUSTOM_DATA_RECORD
 from rozyn_estimator.errors import BagError
-from rozyn_estimator.vehicle import load_yaml_file, one_line
+from rozyn_estimator.yaml_file import load_yaml_file, one_line
 
 BAG_SUFFIXES = (".mcap", ".db3", ".bag")
 MAX_METADATA_BYTES = 16 << 20  # rosbag2's metadata.yaml of thousands of files stays far below

@@ -19,7 +19,7 @@ from rozyn_estimator.bag.source import RawBatch, TopicInfo, batched, files_text,
 from rozyn_estimator.bag.typestore import absolute_topic
 from rozyn_estimator.bag.writer import CUSTOM_DATA_RECORD
 from rozyn_estimator.errors import BagError
-from rozyn_estimator.vehicle import one_line
+from rozyn_estimator.yaml_file import one_line
 
 
 class SalvageScan:

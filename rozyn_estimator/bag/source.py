@@ -26,7 +26,7 @@ import numpy as np
 
 from rozyn_estimator.bag.cdr import Packed
 from rozyn_estimator.errors import BagError
-from rozyn_estimator.vehicle import one_line
+from rozyn_estimator.yaml_file import one_line
 
 
 @dataclass(frozen=True)
