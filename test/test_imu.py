@@ -84,9 +84,10 @@ def test_sensor_sets_that_cannot_work_are_refused_in_one_line(tmp_path, block, s
 
 def test_positions_in_two_places_and_a_half_car_imu_on_a_full_car_are_refused(tmp_path):
     path = tmp_path / "car.yaml"
-    path.write_text(yaml.safe_dump({"sensor_front_offset_m": 0.1, "sensors": IMU_BLOCK}))
-    with pytest.raises(ConfigError, match="not both"):
-        load_vehicle(path)
+    for given in (0.1, "front", [1.5, 1.5]):  # not the block's, or not a position at all: no crash
+        path.write_text(yaml.safe_dump({"sensor_front_offset_m": given, "sensors": IMU_BLOCK}))
+        with pytest.raises(ConfigError, match="not both"):
+            load_vehicle(path)
     path.write_text(yaml.safe_dump({"model": "full", "sensors": IMU_BLOCK}))
     with pytest.raises(ConfigError, match="see heave but not roll: add a gyro_x"):
         load_any_vehicle(path)
