@@ -34,14 +34,21 @@ def _p_values(car: str, noise: str, speed: float, seeds: range, jobs: int | None
 
 
 def test_quiet_sensors_do_not_cry_wolf():
-    """Noise-free sensors at 70 km/h, where the half car's check warned in every run; the full
-    car's four exact sensors on a rigid body, which span three motions, and four nearly exact
-    ones, whose floors the fit identifies only in the direction the body does not move."""
+    """Noise-free sensors at 70 km/h, where the half car's check warned in every run (p near 0);
+    the full car's four exact sensors on a rigid body, which span three motions, and four nearly
+    exact ones, whose floors the fit identifies only in the direction the body does not move.
+
+    Held to ``ALPHA / 10``, not ``ALPHA``: the dither that stands for the model's resolution is
+    drawn from the window's DFT bytes, which the FFT's last bits change from one numpy/scipy
+    release to the next, and a calibrated check then falls below ``ALPHA`` once in a thousand
+    runs of each draw (one run read p = 0.0008 with numpy 2.4 and scipy 1.17, 0.08 with
+    2.3 and 1.16; its estimate the same to 1e-6). Eight runs against ``ALPHA`` would fail a
+    calibrated check once in 125 releases; the check that cries wolf is far below either."""
     half = _p_values("half", "0", 70.0, range(9001, 9005), jobs=2)
-    assert np.all(half >= ALPHA), half
+    assert np.all(half >= ALPHA / 10), half
     for noise in ("0", "0.001"):
         full = _p_values("full", noise, 70.0, range(9001, 9003), jobs=2)
-        assert np.all(np.isfinite(full)) and np.all(full >= ALPHA), (noise, full)
+        assert np.all(np.isfinite(full)) and np.all(full >= ALPHA / 10), (noise, full)
 
 
 @pytest.mark.slow
