@@ -59,6 +59,19 @@ def test_stretches_alike_give_the_steady_drives_factors():
     np.testing.assert_allclose(stretched.variance_factors, steady.variance_factors, rtol=0.03)
 
 
+def _two_speeds(tmp_path, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(speed per sample, accelerations with noise) of a 120 s drive: half at 8 m/s, half at
+    25 m/s, a stop between."""
+    cycle = np.array([[0, 8.0], [55, 8.0], [58, 0.0], [66, 0.0], [72, 25.0], [130, 25.0]])
+    path = tmp_path / "two_speeds.csv"
+    path.write_text("time_s,speed_mps\n" + "".join(f"{t:g},{v:g}\n" for t, v in cycle))
+    sim = Simulation(SimConfig(model="full", full_vehicle=EXACT, road=RoadSpec(amplitudes="gaussian"),
+                               seed=seed, drive_cycle_file=str(path)))
+    block = sim.run(120.0)
+    noise = np.random.default_rng(seed).standard_normal(block.accel_mps2.shape) * 0.02
+    return block.speed_mps, block.accel_mps2 + noise
+
+
 def test_a_drive_at_two_speeds_raises_the_roll_more_than_the_heave(tmp_path, monkeypatch):
     """Half the window at 8 m/s, half at 25 m/s (a stop between, masked): the tracks' difference,
     whose power grows at the low speed (their coherence falls with f/v), raises the roll
@@ -73,14 +86,7 @@ def test_a_drive_at_two_speeds_raises_the_roll_more_than_the_heave(tmp_path, mon
         return seen[-1]
 
     monkeypatch.setattr(intermittency, "stretched_factors", spy)
-    cycle = np.array([[0, 8.0], [55, 8.0], [58, 0.0], [66, 0.0], [72, 25.0], [130, 25.0]])
-    path = tmp_path / "two_speeds.csv"
-    path.write_text("time_s,speed_mps\n" + "".join(f"{t:g},{v:g}\n" for t, v in cycle))
-    sim = Simulation(SimConfig(model="full", full_vehicle=EXACT, road=RoadSpec(amplitudes="gaussian"),
-                               seed=6, drive_cycle_file=str(path)))
-    block = sim.run(120.0)
-    y = block.accel_mps2 + np.random.default_rng(6).standard_normal(block.accel_mps2.shape) * 0.02
-    published = np.array(_refined(block.speed_mps, y).variance_factors)
+    published = np.array(_refined(*_two_speeds(tmp_path, 6)).variance_factors)
     stretched = seen[-1]
     assert np.all(stretched >= 1.0), stretched
     assert stretched[1] > 1.2 * stretched[0] and stretched[4] > 1.2 * stretched[0], stretched
@@ -99,14 +105,7 @@ def test_the_factors_over_every_third_frequency_are_the_whole_sums(tmp_path, mon
         return real(objective, *args, **kwargs)
 
     monkeypatch.setattr(intermittency, "intermittency_factors", spy)
-    cycle = np.array([[0, 8.0], [55, 8.0], [58, 0.0], [66, 0.0], [72, 25.0], [130, 25.0]])
-    path = tmp_path / "two_speeds.csv"
-    path.write_text("time_s,speed_mps\n" + "".join(f"{t:g},{v:g}\n" for t, v in cycle))
-    sim = Simulation(SimConfig(model="full", full_vehicle=EXACT, road=RoadSpec(amplitudes="gaussian"),
-                               seed=7, drive_cycle_file=str(path)))
-    block = sim.run(120.0)
-    y = block.accel_mps2 + np.random.default_rng(7).standard_normal(block.accel_mps2.shape) * 0.02
-    _refined(block.speed_mps, y)
+    _refined(*_two_speeds(tmp_path, 7))
     objective, args, kwargs = calls[-1]
     at, counts = objective.sampled_frequencies()
     assert at.size < 0.4 * objective.counts.size and counts.sum() == pytest.approx(objective.counts.sum())
