@@ -10,8 +10,16 @@ import pytest
 
 from rozyn_estimator.method import Estimate
 from rozyn_estimator.method.budget import Budget
+from rozyn_estimator.method.config import FULL_PARAM_NAMES
 from rozyn_estimator.online.batch import SpeedSamples
-from rozyn_estimator.online.fusion import DRIVE_MODEL_FLOOR, Fusion, stops_in, trimmed
+from rozyn_estimator.online.fusion import (
+    DRIVE_MODEL_FLOOR,
+    DRIVE_MODEL_FLOORS,
+    Fusion,
+    drive_model_floor,
+    stops_in,
+    trimmed,
+)
 from rozyn_estimator.online.records import NS, Job
 
 S = 1_000_000_000  # ns per second
@@ -71,8 +79,17 @@ def test_stop_and_go_windows_keep_their_models_floor_which_fusing_does_not_reduc
         fusion = Fusion()
         for lo, hi in _windows(0.0, 7, every_s=120.0):
             out = fusion.add(_estimate([1000.0, 2000.0, 1.2]), lo, hi, [], unsteady=unsteady)
-        floor = DRIVE_MODEL_FLOOR * np.array([1000.0, 2000.0, 1.2]) if unsteady else np.zeros(3)
+        floor = DRIVE_MODEL_FLOOR * np.array([1000.0, 2000.0, 0.6]) if unsteady else np.zeros(3)
         np.testing.assert_allclose(np.diag(out.covariance), STD**2 / 7 + floor**2)
+
+
+def test_the_cogs_position_keeps_half_the_floor_and_the_lateral_one_of_a_metre():
+    """l_f's and y_c's measured bias on urban windows is a quarter to a half of the inertias':
+    their floors are half the others' share (y_c's of 1 m, as it may be 0)."""
+    params = np.array([1000.0, 400.0, 2000.0, 1.2, 0.0])
+    floor = drive_model_floor(FULL_PARAM_NAMES, params)
+    np.testing.assert_allclose(floor, [3.0, 1.2, 6.0, 0.0018, 0.0015])
+    assert DRIVE_MODEL_FLOORS["cog_from_front_axle_m"] == DRIVE_MODEL_FLOOR / 2
 
 
 def _drive(fusion: Fusion, before, after, stop_s: float = 400.0, count: int = 14):
