@@ -258,9 +258,9 @@ class WhittleObjective:
         """(S, dS/dθ, what each frequency counts for) over :meth:`sampled_rows`' frequencies."""
         S, _ = self.factored(theta)
         assert self._state is not None
-        if self._sub.size == self.counts.size:
-            return S, self.model.to_targets(self._state[1]), np.ravel(self.counts)
         at, counts = self.sampled_frequencies()
+        if at.size == self.counts.size:  # every frequency: no selection to copy
+            return S, self.model.to_targets(self._state[1]), counts
         return S[at], self.model.to_targets(self._state[1], at), counts
 
     def sampled(self, changes: np.ndarray, linv: np.ndarray) -> np.ndarray:
