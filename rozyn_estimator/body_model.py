@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rozyn_estimator.corners import Corners
 from rozyn_estimator.gravity import gravity_height_m, rotation_inertia_kgm2, rotation_stiffness_nmprad
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import FullVehicle
@@ -57,57 +58,9 @@ class SecondOrderModel:
         return int(self.mass.shape[0])
 
 
-@dataclass(frozen=True)
-class Corners:
-    """A vehicle as its equations see it: the corners under its body, in the vehicle's order."""
-
-    x_m: np.ndarray  # (n,) behind the front axle
-    y_m: np.ndarray  # (n,) left of the centreline
-    unsprung_mass_kg: np.ndarray  # (n,)
-    suspension_stiffness_npm: np.ndarray  # (n,)
-    suspension_damping_nspm: np.ndarray  # (n,)
-    tyre_stiffness_npm: np.ndarray  # (n,)
-    tyre_damping_nspm: np.ndarray  # (n,)
-    bars_npm: np.ndarray  # (n, n) springs between the corners' extensions (anti-roll bars)
-
-    @property
-    def count(self) -> int:
-        return int(self.x_m.size)
-
-
-def corners_of(v: AnyVehicle) -> Corners:
-    """The vehicle's corners: the half car's front and rear axle on the centreline, the full car's four."""
-    if isinstance(v, FullVehicle):
-        bars = np.zeros((4, 4))
-        for rows, bar_nmprad, track in ((slice(0, 2), v.anti_roll_stiffness_front_nmprad, v.track_front_m),
-                                        (slice(2, 4), v.anti_roll_stiffness_rear_nmprad, v.track_rear_m)):
-            bars[rows, rows] = bar_nmprad / track**2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
-        return Corners(np.array(v.corner_x_m), np.array(v.corner_y_m), np.array(v.unsprung_mass_kg),
-                       np.array(v.suspension_stiffness_npm), np.array(v.suspension_damping_nspm),
-                       np.array(v.tyre_stiffness_npm), np.array(v.tyre_damping_nspm), bars)
-    return Corners(np.array([0.0, v.wheelbase_m]), np.zeros(2),
-                   np.array([v.unsprung_mass_front_kg, v.unsprung_mass_rear_kg]),
-                   np.array([v.suspension_stiffness_front_npm, v.suspension_stiffness_rear_npm]),
-                   np.array([v.suspension_damping_front_nspm, v.suspension_damping_rear_nspm]),
-                   np.array([v.tyre_stiffness_front_npm, v.tyre_stiffness_rear_npm]),
-                   np.array([v.tyre_damping_front_nspm, v.tyre_damping_rear_nspm]), np.zeros((2, 2)))
-
-
-def rolls(v: AnyVehicle) -> bool:
-    """Whether the body rolls in the vehicle's model (the full car)."""
-    return isinstance(v, FullVehicle)
-
-
-def body_inertias(v: AnyVehicle) -> np.ndarray:
-    """The body's (m, I_yy[, I_xx]) [kg, kg m²], in ``q``'s order."""
-    if isinstance(v, FullVehicle):
-        return np.array([v.sprung_mass_kg, v.pitch_inertia_kgm2, v.roll_inertia_kgm2])
-    return np.array([v.sprung_mass_kg, v.pitch_inertia_kgm2])
-
-
 def corner_count(v: AnyVehicle) -> int:
     """How many corners (wheels, tyres) the vehicle stands on."""
-    return 4 if isinstance(v, FullVehicle) else 2
+    return len(v.AXLE_SLOTS["front"]) + len(v.AXLE_SLOTS["rear"])
 
 
 def heave_index(v: AnyVehicle) -> int:
@@ -122,7 +75,7 @@ def pitch_index(v: AnyVehicle) -> int:
 
 def dof(v: AnyVehicle) -> int:
     """The length of ``q``: the wheels and the body's two or three coordinates."""
-    return corner_count(v) + body_inertias(v).size
+    return corner_count(v) + len(v.body_inertias)
 
 
 def body_rows(v: AnyVehicle, points_m: np.ndarray) -> np.ndarray:
@@ -131,21 +84,21 @@ def body_rows(v: AnyVehicle, points_m: np.ndarray) -> np.ndarray:
     p = np.atleast_2d(np.asarray(points_m, dtype=float))
     if p.ndim != 2 or p.shape[1] != 2:
         raise ValueError(f"points_m must have shape (k, 2) of (x, y), got {np.shape(points_m)}")
-    if not rolls(v) and np.any(p[:, 1] != 0.0):
+    if not v.ROLLS and np.any(p[:, 1] != 0.0):
         raise ValueError("a body that does not roll (the half car) has its points on the centreline: y = 0")
     rows = np.zeros((p.shape[0], dof(v)))
     heave = heave_index(v)
     rows[:, heave] = 1.0
     rows[:, heave + 1] = v.cog_from_front_axle_m - p[:, 0]
-    if rolls(v):
-        rows[:, heave + 2] = p[:, 1] - _cog_lateral_m(v)
+    if v.ROLLS:
+        rows[:, heave + 2] = p[:, 1] - v.cog_lateral_m
     return rows
 
 
 def suspension_rows(v: AnyVehicle) -> np.ndarray:
     """(corners, dof) map ``G`` from ``q`` to the corners' extensions ``e = z(corner) - x_t``
     (eqs 3-8, 3-9): the suspension part of eq 3-5 is ``G^T diag(k_s) G``, of eq 3-6 ``G^T diag(c_s) G``."""
-    c = corners_of(v)
+    c = v.corners
     g = body_rows(v, np.column_stack([c.x_m, c.y_m]))
     g[:, : c.count] = -np.eye(c.count)
     return g
@@ -154,7 +107,7 @@ def suspension_rows(v: AnyVehicle) -> np.ndarray:
 def second_order_model(v: AnyVehicle) -> SecondOrderModel:
     """Mass, damping and stiffness matrices (eqs 3-4 to 3-7 on the vehicle's corners; see the
     module's docstring), the road under each tyre as the inputs."""
-    c = corners_of(v)
+    c = v.corners
     g = suspension_rows(v)
 
     def on_corners(suspension: np.ndarray, tyre: np.ndarray, between: np.ndarray) -> np.ndarray:
@@ -166,7 +119,7 @@ def second_order_model(v: AnyVehicle) -> SecondOrderModel:
 
     stiffness = on_corners(c.suspension_stiffness_npm, c.tyre_stiffness_npm, c.bars_npm)
     damping = on_corners(c.suspension_damping_nspm, c.tyre_damping_nspm, np.zeros_like(c.bars_npm))
-    mass = np.diag(np.concatenate([c.unsprung_mass_kg, body_inertias(v)]))
+    mass = np.diag(np.concatenate([c.unsprung_mass_kg, v.body_inertias]))
     h = gravity_height_m(v)  # the weight through the geometry (0 where the heights are not given)
     for k in range(heave_index(v) + 1, dof(v)):  # pitch and roll alike
         stiffness[k, k] += rotation_stiffness_nmprad(v.sprung_mass_kg, h)
@@ -187,7 +140,7 @@ def channel_rows(v: AnyVehicle, sensors: Sequence[int] | None = None) -> tuple[n
     kinds = [v.channel_kinds[c] for c in index]
     xs, ys = np.asarray(v.sensor_x_m)[index], np.asarray(v.sensor_y_m)[index]
     rows = np.array([GYRO_ROWS.get(kind, (1.0, -x, y)) for kind, x, y in zip(kinds, xs, ys, strict=True)])
-    b = 3 if rolls(v) else 2
+    b = 3 if v.ROLLS else 2
     return rows.reshape(len(kinds), 3)[:, :b], np.array([kind in GYRO_ROWS for kind in kinds])
 
 
@@ -200,8 +153,8 @@ def sensor_rows(v: AnyVehicle) -> np.ndarray:
     heave = heave_index(v)
     rows[:, heave] = body[:, 0]
     rows[:, heave + 1] = v.cog_from_front_axle_m * body[:, 0] + body[:, 1]
-    if rolls(v):
-        rows[:, heave + 2] = body[:, 2] - _cog_lateral_m(v) * body[:, 0]
+    if v.ROLLS:
+        rows[:, heave + 2] = body[:, 2] - v.cog_lateral_m * body[:, 0]
     return rows
 
 
@@ -215,10 +168,6 @@ def sensor_points(v: AnyVehicle) -> np.ndarray:
     return np.column_stack([v.sensor_x_m, v.sensor_y_m])
 
 
-def _cog_lateral_m(v: AnyVehicle) -> float:
-    return float(v.cog_lateral_m) if isinstance(v, FullVehicle) else 0.0
-
-
-__all__ = ["GYRO_ROWS", "AnyVehicle", "Corners", "SecondOrderModel", "body_inertias", "body_rows",
-           "channel_rows", "corner_count", "corners_of", "dof", "heave_index", "pitch_index", "rolls",
+__all__ = ["GYRO_ROWS", "AnyVehicle", "Corners", "SecondOrderModel", "body_rows",
+           "channel_rows", "corner_count", "dof", "heave_index", "pitch_index",
            "second_order_model", "sensor_points", "sensor_rates", "sensor_rows", "suspension_rows"]

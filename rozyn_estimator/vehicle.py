@@ -18,8 +18,10 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, ClassVar
 
+import numpy as np
 import yaml
 
+from rozyn_estimator.corners import Corners, corners_from
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.parameters import build, check, param, spec_of
 from rozyn_estimator.sensors import (
@@ -44,6 +46,13 @@ class Vehicle:
     """
 
     PARAM_PREFIX: ClassVar[str] = "vehicle."
+    ROLLS: ClassVar[bool] = False  # the body heaves and pitches (rozyn_estimator.body_model)
+    AXLE_SLOTS: ClassVar[Mapping[str, tuple[int, ...]]] = {"front": (0,), "rear": (1,)}  # channel slots
+    CORNER_FIELDS: ClassVar[tuple[str, ...]] = tuple(  # the fields holding the corners' values
+        f"{value}_{axle}_{unit}" for value, unit in (
+            ("suspension_stiffness", "npm"), ("suspension_damping", "nspm"), ("tyre_stiffness", "npm"),
+            ("tyre_damping", "nspm"), ("unsprung_mass", "kg")) for axle in ("front", "rear"))
+    SENSOR_FIELDS: ClassVar[tuple[str, ...]] = ("sensor_front_offset_m", "sensor_rear_offset_m")  # positions
 
     sprung_mass_kg: float = param(1000.0, "sprung mass (the simulator's truth)", unit="kg",
                                   low=0.0, open_low=True)
@@ -91,6 +100,51 @@ class Vehicle:
     def cog_from_rear_axle_m(self) -> float:
         """lr = wheelbase - lf [m]."""
         return self.wheelbase_m - self.cog_from_front_axle_m
+
+    @property
+    def cog_lateral_m(self) -> float:
+        """The half car's centre of gravity sits on its centreline: 0 [m]."""
+        return 0.0
+
+    @property
+    def corners(self) -> Corners:
+        """The front and rear axle, each lumped on the centreline (the one model's two corners)."""
+        return corners_from((0.0, self.wheelbase_m), (0.0, 0.0),
+                            (self.unsprung_mass_front_kg, self.unsprung_mass_rear_kg),
+                            ((self.suspension_stiffness_front_npm, self.suspension_stiffness_rear_npm),
+                             (self.suspension_damping_front_nspm, self.suspension_damping_rear_nspm)),
+                            ((self.tyre_stiffness_front_npm, self.tyre_stiffness_rear_npm),
+                             (self.tyre_damping_front_nspm, self.tyre_damping_rear_nspm)))
+
+    @property
+    def body_values(self) -> np.ndarray:
+        """What the estimator identifies, in the likelihood's order: (m, I_yy, l_f) [kg, kg m², m]."""
+        return np.array([self.sprung_mass_kg, self.pitch_inertia_kgm2, self.cog_from_front_axle_m])
+
+    @property
+    def body_inertias(self) -> np.ndarray:
+        """The body's (m, I_yy) [kg, kg m²], in the order of its coordinates (heave, pitch)."""
+        return np.array([self.sprung_mass_kg, self.pitch_inertia_kgm2])
+
+    def with_body_values(self, values: np.ndarray) -> Vehicle:
+        """A copy with :attr:`body_values` replaced (validated: ConfigError where they are not a car)."""
+        m, iyy, lf = (float(x) for x in values)
+        return self.replace(sprung_mass_kg=m, pitch_inertia_kgm2=iyy, cog_from_front_axle_m=lf)
+
+    @property
+    def coherence_track_m(self) -> float:
+        """The track the two road tracks' coherence is scaled by: none, one track (0) [m]."""
+        return 0.0
+
+    def with_corner_sensors(self) -> Vehicle:
+        """A copy with two accelerometers on the axles in place of any sensors block (the channels
+        Rozyn's stage reads: :mod:`rozyn_estimator.method.imu`)."""
+        return self.replace(sensors=None, sensor_front_offset_m=0.0, sensor_rear_offset_m=0.0)
+
+    def sensor_shift(self, channel: int, h_m: float) -> dict[str, float]:
+        """The field changes that move the sensor of channel slot ``channel`` ``h_m`` further back."""
+        field = ("sensor_front_offset_m", "sensor_rear_offset_m")[channel]
+        return {field: getattr(self, field) + h_m}
 
     @property
     def sensor_x_m(self) -> tuple[float, float]:

@@ -23,9 +23,8 @@ symmetric full car then has the half car's heave and pitch modes exactly, and
 of the track, typical of passenger cars (the pitch default has 1.41 m, half the
 wheelbase). Lateral CoG 0, no anti-roll bars; the accelerometers sit above the wheels.
 
-Anti-roll bars are given as the roll stiffness each adds to its axle, in N*m/rad: a bar
-of ``K`` adds the energy ``K/2 ((e_L - e_R)/track)^2``, ``e`` the corners' suspension
-extensions, i.e. a spring of ``K / track^2`` N/m between the two corners' deflections.
+Anti-roll bars are given as the roll stiffness each adds to its axle, in N*m/rad
+(:class:`rozyn_estimator.corners.Bar`).
 """
 
 from __future__ import annotations
@@ -36,6 +35,9 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, ClassVar
 
+import numpy as np
+
+from rozyn_estimator.corners import Bar, Corners, corners_from
 from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.parameters import Param, build, check, param, spec_of
 from rozyn_estimator.sensors import (
@@ -86,6 +88,12 @@ class FullVehicle:
     """
 
     PARAM_PREFIX: ClassVar[str] = "vehicle."
+    ROLLS: ClassVar[bool] = True  # the body heaves, pitches and rolls (rozyn_estimator.body_model)
+    AXLE_SLOTS: ClassVar[Mapping[str, tuple[int, ...]]] = {"front": (0, 1), "rear": (2, 3)}  # channel slots
+    CORNER_FIELDS: ClassVar[tuple[str, ...]] = (  # the fields holding the corners' and bars' values
+        "suspension_stiffness_npm", "suspension_damping_nspm", "tyre_stiffness_npm", "tyre_damping_nspm",
+        "unsprung_mass_kg", "anti_roll_stiffness_front_nmprad", "anti_roll_stiffness_rear_nmprad")
+    SENSOR_FIELDS: ClassVar[tuple[str, ...]] = ("sensor_x_m", "sensor_y_m")  # the sensors' positions
 
     sprung_mass_kg: float = param(1000.0, "sprung mass (the simulator's truth)", unit="kg", low=0.0,
                                   open_low=True)
@@ -137,6 +145,46 @@ class FullVehicle:
     def cog_from_rear_axle_m(self) -> float:
         """lr = wheelbase - lf [m]."""
         return self.wheelbase_m - self.cog_from_front_axle_m
+
+    @property
+    def corners(self) -> Corners:
+        """The four corners and the two bars (each axle's, zero where there is none)."""
+        bars = (Bar(0, self.track_front_m, self.anti_roll_stiffness_front_nmprad),
+                Bar(2, self.track_rear_m, self.anti_roll_stiffness_rear_nmprad))
+        return corners_from(self.corner_x_m, self.corner_y_m, self.unsprung_mass_kg,
+                            (self.suspension_stiffness_npm, self.suspension_damping_nspm),
+                            (self.tyre_stiffness_npm, self.tyre_damping_nspm), bars)
+
+    @property
+    def body_values(self) -> np.ndarray:
+        """What the estimator identifies, in the likelihood's order: (m, I_xx, I_yy, l_f, y_c)
+        [kg, kg m², kg m², m, m]."""
+        return np.array([self.sprung_mass_kg, self.roll_inertia_kgm2, self.pitch_inertia_kgm2,
+                         self.cog_from_front_axle_m, self.cog_lateral_m])
+
+    @property
+    def body_inertias(self) -> np.ndarray:
+        """The body's (m, I_yy, I_xx) [kg, kg m²], in the order of its coordinates (heave, pitch, roll)."""
+        return np.array([self.sprung_mass_kg, self.pitch_inertia_kgm2, self.roll_inertia_kgm2])
+
+    def with_body_values(self, values: np.ndarray) -> FullVehicle:
+        """A copy with :attr:`body_values` replaced (validated: ConfigError where they are not a car)."""
+        m, ixx, iyy, lf, yc = (float(x) for x in values)
+        return self.replace(sprung_mass_kg=m, roll_inertia_kgm2=ixx, pitch_inertia_kgm2=iyy,
+                            cog_from_front_axle_m=lf, cog_lateral_m=yc)
+
+    @property
+    def coherence_track_m(self) -> float:  # the two road tracks' coherence's scale: the front track [m]
+        return self.track_front_m
+
+    def with_corner_sensors(self) -> FullVehicle:
+        """A copy with four accelerometers above the wheels in place of any sensors block (the
+        channels Rozyn's stage reads: :mod:`rozyn_estimator.method.imu`)."""
+        return self.replace(sensors=None, sensor_x_m=self.corner_x_m, sensor_y_m=self.corner_y_m)
+
+    def sensor_shift(self, channel: int, h_m: float) -> dict[str, tuple[float, ...]]:
+        """The field changes that move the sensor of channel slot ``channel`` ``h_m`` further back."""
+        return {"sensor_x_m": tuple(x + h_m * (i == channel) for i, x in enumerate(self.sensor_x_m))}
 
     @property
     def corner_x_m(self) -> Quad:
@@ -192,8 +240,8 @@ class FullVehicle:
 
     @property
     def is_symmetric(self) -> bool:
-        """Left and right alike (values, CoG on the centreline): heave and pitch do not couple
-        with roll, and :func:`centreline_half_car` is exact."""
+        """Left and right alike (values, CoG): heave and pitch do not couple with roll, and
+        :func:`centreline_half_car` is exact."""
         pairs = (self.unsprung_mass_kg, self.tyre_stiffness_npm, self.tyre_damping_nspm,
                  self.suspension_stiffness_npm, self.suspension_damping_nspm)
         return self.cog_lateral_m == 0.0 and all(p[0] == p[1] and p[2] == p[3] for p in pairs)
@@ -216,8 +264,7 @@ class FullVehicle:
 
 
 def _spans(v: FullVehicle) -> tuple[float, float]:
-    """(x of the rear sensors' mean minus the front ones', y of the left ones' mean minus the
-    right ones')."""
+    """(the rear sensors' mean x less the front ones', the left ones' mean y less the right ones')."""
     x, y = v.sensor_x_m, v.sensor_y_m
     return (x[2] + x[3] - x[0] - x[1]) / 2, (y[0] + y[2] - y[1] - y[3]) / 2
 

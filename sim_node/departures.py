@@ -124,14 +124,9 @@ class Departures:
         car); None when it is linear."""
         if not self.nonlinear:
             return None
-        stiffness: tuple[float, ...]
-        damping: tuple[float, ...]
-        if isinstance(vehicle, FullVehicle):
-            stiffness, damping = vehicle.suspension_stiffness_npm, vehicle.suspension_damping_nspm
-        else:
-            stiffness = (vehicle.suspension_stiffness_front_npm, vehicle.suspension_stiffness_rear_npm)
-            damping = (vehicle.suspension_damping_front_nspm, vehicle.suspension_damping_rear_nspm)
-        return SuspensionLaw(stiffness_npm=tuple(stiffness), damping_nspm=tuple(damping),
+        c = vehicle.corners
+        return SuspensionLaw(stiffness_npm=tuple(c.suspension_stiffness_npm.tolist()),
+                             damping_nspm=tuple(c.suspension_damping_nspm.tolist()),
                              damper_ratio=self.damper_ratio, progression=self.spring_progression,
                              reference_m=self.spring_reference_m)
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import ast
 import graphlib
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -19,7 +20,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PKG = "rozyn_estimator"
 SHARED = {f"{PKG}", f"{PKG}.errors", f"{PKG}.vehicle", f"{PKG}.vehicle_full", f"{PKG}.parameters",
-          f"{PKG}.tolerances", f"{PKG}.gravity", f"{PKG}.body_model", f"{PKG}.sensors", f"{PKG}.yaml_file"}
+          f"{PKG}.tolerances", f"{PKG}.gravity", f"{PKG}.body_model", f"{PKG}.corners", f"{PKG}.sensors",
+          f"{PKG}.yaml_file"}
 ROS_PACKAGES = {"rclpy", "builtin_interfaces", "diagnostic_msgs", "geometry_msgs", "sensor_msgs", "std_msgs",
                 "nav_msgs", "rcl_interfaces", "rosgraph_msgs"}
 # sub-package -> the project modules it may import (besides its own) and third-party ROS
@@ -133,6 +135,16 @@ NOT_IMPORTED = {f"{PKG}.tools.replay": ("sim_node",)}
 def test_tools_keep_their_finer_rules(name):
     forbidden = next(v for p, v in NOT_IMPORTED.items() if name.startswith(p))
     assert not {t for t in _imports(name) if t.split(".")[0] in forbidden}, name
+
+
+@pytest.mark.parametrize("name", sorted(n for n in MODULES if n.startswith(f"{PKG}.method")
+                                         or n == f"{PKG}.body_model"))
+def test_the_method_never_asks_which_car(name):
+    """One vehicle model: the method reads any car through the members both vehicle files have
+    (``corners``, ``ROLLS``, ``body_values`` …), never by naming the full car's class."""
+    text = MODULES[name].read_text()
+    assert "FullVehicle" not in text or name == f"{PKG}.body_model", name  # its AnyVehicle names both
+    assert not re.search(r"isinstance\([^)]*Vehicle\)", text), name
 
 
 def test_no_folder_holds_more_than_15_modules():

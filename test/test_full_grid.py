@@ -16,7 +16,6 @@ from rozyn_estimator.method import PipelineConfig
 from rozyn_estimator.method.pipeline import estimate
 from rozyn_estimator.method.vehicle_fit import whittle
 from rozyn_estimator.method.vehicle_fit.corner_matrices import (
-    CORNER_VALUES,
     corner_matrices,
     corner_matrix_derivatives,
     corner_response_derivatives,
@@ -132,14 +131,14 @@ def test_the_optimisers_hessian_is_the_fisher_information_within_a_few_percent()
 
 def test_the_corner_matrices_derivatives_are_their_slopes():
     s = 2j * np.pi * np.linspace(0.5, 115.0, 60)
-    base = np.concatenate([np.ravel(getattr(BARS, f)) for f in CORNER_VALUES])
+    base = np.concatenate([np.ravel(getattr(BARS, f)) for f in FullVehicle.CORNER_FIELDS])
     directions = np.random.default_rng(2).standard_normal((3, base.size)) * base
     dZ, dT = corner_matrix_derivatives(BARS, s, directions)
     h = 1e-6
 
     def at(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        values = {f: tuple(x[4 * i: 4 * i + 4]) for i, f in enumerate(CORNER_VALUES[:5])}
-        values |= {CORNER_VALUES[5]: float(x[20]), CORNER_VALUES[6]: float(x[21])}
+        values = {f: tuple(x[4 * i: 4 * i + 4]) for i, f in enumerate(FullVehicle.CORNER_FIELDS[:5])}
+        values |= {FullVehicle.CORNER_FIELDS[5]: float(x[20]), FullVehicle.CORNER_FIELDS[6]: float(x[21])}
         return corner_matrices(dataclasses.replace(BARS, **values), s)
 
     for g, d in enumerate(directions):
@@ -153,7 +152,7 @@ def test_the_corner_responses_derivatives_are_the_products_of_the_matrices_deriv
     :func:`corner_matrix_derivatives`' matrices (the bars included)."""
     rng = np.random.default_rng(5)
     s = 2j * np.pi * np.linspace(0.5, 115.0, 40)
-    base = np.concatenate([np.ravel(getattr(BARS, f)) for f in CORNER_VALUES])
+    base = np.concatenate([np.ravel(getattr(BARS, f)) for f in FullVehicle.CORNER_FIELDS])
     directions = rng.standard_normal((4, base.size)) * base
 
     def complex_normal(*shape: int) -> np.ndarray:

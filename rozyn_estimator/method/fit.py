@@ -38,11 +38,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from rozyn_estimator.body_model import AnyVehicle, Corners, corners_of, rolls
+from rozyn_estimator.body_model import AnyVehicle, Corners
 from rozyn_estimator.gravity import gravity_height_m, rotation_inertia_kgm2, rotation_stiffness_nmprad
 from rozyn_estimator.method.identification import IdentificationError, Mode
 from rozyn_estimator.vehicle import Vehicle
-from rozyn_estimator.vehicle_full import FullVehicle
 
 STIFFNESS_MODELS = ("eq2-21", "eq2-22", "condensed")
 _PASSES = 10  # the weight's stiffness is ~1 % of the pitch stiffness: each pass gains ~2 digits
@@ -71,7 +70,7 @@ def _corner_scalars(c: Corners, s: complex, model: str) -> np.ndarray:
 def corner_impedances(v: Vehicle, s: complex, model: str) -> tuple[complex, complex]:
     """(front, rear) dynamic stiffness ``k + s c`` of the half car's suspension + tyre at pole ``s``."""
     _checked_model(model)
-    front, rear = _corner_scalars(corners_of(v), s, model)
+    front, rear = _corner_scalars(v.corners, s, model)
     return complex(front), complex(rear)
 
 
@@ -91,7 +90,7 @@ def corner_stiffness(v: AnyVehicle, s: complex, model: str) -> np.ndarray:
     connection ``K(0) + s C(0)`` (``C`` its slope at rest), ``eq2-22`` the connection at the
     mode's natural frequency ``ω = |s|``, ``Re Z(iω) + s Im Z(iω)/ω``."""
     _checked_model(model)
-    c = corners_of(v)
+    c = v.corners
     if not np.any(c.bars_npm):
         return np.diag(_corner_scalars(c, s, model))
     if model == "condensed":
@@ -110,7 +109,7 @@ def _body_columns(x_m: Sequence[float] | np.ndarray, y_m: Sequence[float] | np.n
                   v: AnyVehicle) -> np.ndarray:
     """(n, 2 or 3) a rigid motion's basis at body points: ``(1, x[, y])``."""
     cols = [np.ones(len(x_m)), np.asarray(x_m, dtype=float)]
-    return np.column_stack([*cols, np.asarray(y_m, dtype=float)] if rolls(v) else cols)
+    return np.column_stack([*cols, np.asarray(y_m, dtype=float)] if v.ROLLS else cols)
 
 
 def plane_map(points_x_m: Sequence[float], points_y_m: Sequence[float], v: AnyVehicle) -> np.ndarray:
@@ -121,8 +120,8 @@ def plane_map(points_x_m: Sequence[float], points_y_m: Sequence[float], v: AnyVe
     rank, tol = pts.shape[1], 1e-6 * max(1.0, float(np.abs(pts).max()))
     if pts.shape[0] < rank or np.linalg.matrix_rank(pts, tol=tol) < rank:
         raise IdentificationError("full car: the accelerometers must be three or four points not on one line"
-                                  if rolls(v) else "the two accelerometers must sit at different x")
-    c = corners_of(v)
+                                  if v.ROLLS else "the two accelerometers must sit at different x")
+    c = v.corners
     return _body_columns(c.x_m, c.y_m, v) @ np.linalg.pinv(pts)
 
 
@@ -167,7 +166,7 @@ def fit_inertia(v: AnyVehicle, modes: Sequence[Mode], model: str = "eq2-22", kin
     """
     if kind not in FIT_KINDS:
         raise ValueError(f"unknown fit kind {kind!r}; choose from {', '.join(FIT_KINDS)}")
-    if kind == "stiffness-block" and rolls(v):
+    if kind == "stiffness-block" and v.ROLLS:
         raise ValueError("the stiffness-block fit is the half car's (two modes, eq 2-29)")
     _checked_model(model)
     h = gravity_height_m(v) if kind == "modal" else 0.0
@@ -178,8 +177,8 @@ def fit_inertia(v: AnyVehicle, modes: Sequence[Mode], model: str = "eq2-22", kin
         if abs(params[0] - last[0]) < 1e-12 * params[0]:
             break
     if h:  # the fit sees the inertia the body swings with: I + μ h²
-        inertias = slice(1, 3) if rolls(v) else slice(1, 2)
-        unsprung_kg = float(corners_of(v).unsprung_mass_kg.sum())
+        inertias = slice(1, 3) if v.ROLLS else slice(1, 2)
+        unsprung_kg = float(v.corners.unsprung_mass_kg.sum())
         params[inertias] -= rotation_inertia_kgm2(params[0], h, unsprung_kg)[0]
     return params
 
@@ -190,10 +189,10 @@ def _fit_once(v: AnyVehicle, modes: Sequence[Mode], model: str, kind: str, gravi
     ``gravity_nmprad`` (-m g h for the m of the last pass) on the rotations known."""
     if kind == "stiffness-block":
         return _physical(_stiffness_block(v, modes), v)
-    c = corners_of(v)
+    c = v.corners
     x, y = c.x_m, c.y_m
     shapes = corner_shapes(v, modes, sensors)
-    body = np.linalg.pinv(_body_columns(x, y, v) * np.r_[1.0, -1.0, 1.0][: 3 if rolls(v) else 2])
+    body = np.linalg.pinv(_body_columns(x, y, v) * np.r_[1.0, -1.0, 1.0][: 3 if v.ROLLS else 2])
     rows, target = [], []
     for j, md in enumerate(modes):
         s = md.eigenvalue
@@ -202,7 +201,7 @@ def _fit_once(v: AnyVehicle, modes: Sequence[Mode], model: str, kind: str, gravi
         motion = body @ zc  # (z₀, φ[, θ]): the generalised forces (Σf, -x·f, y·f) gain K_g on the rotations
         total, fx = f.sum(), x @ f - gravity_nmprad * motion[1]
         cols = [np.full(c.count, total), -(x * total + fx), x * fx]
-        if rolls(v):
+        if v.ROLLS:
             fy = y @ f + gravity_nmprad * motion[2]
             cols += [-(y * total + fy), y * fy]
         rows.append(np.column_stack(cols))  # -(G f)_i = s² z_i, linear in u (module docstring)
@@ -217,7 +216,7 @@ def _stiffness_block(v: AnyVehicle, modes: Sequence[Mode]) -> np.ndarray:
     """The half car's ``(a, p, w)`` from the stiffness block of A0 (eq 2-29, with eq 2-21)."""
     L = v.wheelbase_m
     poles = np.array([md.eigenvalue for md in modes])
-    kf, kr = (z.real for z in _corner_scalars(corners_of(v), 0.0, "eq2-21"))
+    kf, kr = (z.real for z in _corner_scalars(v.corners, 0.0, "eq2-21"))
     design = np.array([[kf, 0, 0], [kr, -L * kr, 0], [kf, -L * kf, 0], [kr, -2 * L * kr, L * L * kr]])
     target = -characteristic_matrix(poles, corner_shapes(v, modes))[2:, :2].ravel()  # = M^-1 K (eq 2-29)
     u, *_ = np.linalg.lstsq(design, target, rcond=None)
@@ -227,7 +226,7 @@ def _stiffness_block(v: AnyVehicle, modes: Sequence[Mode]) -> np.ndarray:
 def _physical(u: np.ndarray, v: AnyVehicle) -> np.ndarray:
     """The body parameters from ``u`` (module docstring); IdentificationError outside the
     physical range."""
-    if not isinstance(v, FullVehicle):
+    if not v.ROLLS:
         a, p, w = u
         if not (np.isfinite(u).all() and w > 0 and 0 < p / w < v.wheelbase_m and a - p * p / w > 0):
             raise IdentificationError(
@@ -241,7 +240,7 @@ def _physical(u: np.ndarray, v: AnyVehicle) -> np.ndarray:
             f"full-car fit outside the physical range (1/I_yy = {u3:.3g}, 1/I_xx = {u5:.3g})")
     lf, yc = u2 / u3, u4 / u5
     inv_m = u1 - lf * lf * u3 - yc * yc * u5
-    half_track = 0.5 * max(v.track_front_m, v.track_rear_m)
+    half_track = float(np.abs(v.corners.y_m).max())  # the wider track's half
     if not (0 < lf < v.wheelbase_m and abs(yc) < half_track and inv_m > 0):
         raise IdentificationError(
             f"full-car fit outside the physical range (lf = {lf:.3g} m, lateral CoG = {yc:.3g} m, "

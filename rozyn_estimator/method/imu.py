@@ -20,24 +20,21 @@ from collections.abc import Callable
 import numpy as np
 from scipy import signal
 
-from rozyn_estimator.body_model import AnyVehicle, channel_rows, corners_of, rolls
+from rozyn_estimator.body_model import AnyVehicle, channel_rows
 from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
-from rozyn_estimator.vehicle_full import FullVehicle
 
 
 def _converted(v: AnyVehicle) -> bool:
     """The stage reads the block through the corners: it holds a gyro, or (the full car) any
     block (the stage's plane reads accelerometers at the corners' places)."""
-    return v.sensors is not None and (rolls(v) or any(kind != "accel_z" for kind in v.channel_kinds))
+    return v.sensors is not None and (v.ROLLS or any(kind != "accel_z" for kind in v.channel_kinds))
 
 
 def stage_vehicle(vehicle: AnyVehicle) -> AnyVehicle:
     """The vehicle Rozyn's stage fits: a sensors block's equivalent accelerometers at the corners."""
     if not _converted(vehicle):
         return vehicle
-    if isinstance(vehicle, FullVehicle):
-        return vehicle.replace(sensors=None, sensor_x_m=vehicle.corner_x_m, sensor_y_m=vehicle.corner_y_m)
-    return vehicle.replace(sensors=None, sensor_front_offset_m=0.0, sensor_rear_offset_m=0.0)
+    return vehicle.with_corner_sensors()
 
 
 def stage_input(y: np.ndarray, fs_hz: float, vehicle: AnyVehicle,
@@ -52,7 +49,7 @@ def stage_input(y: np.ndarray, fs_hz: float, vehicle: AnyVehicle,
     data = np.array(y, dtype=float)
     data[:, rate] = np.gradient(data[:, rate], 1.0 / fs_hz, axis=0)  # a rate's derivative
     body = np.linalg.lstsq(rows, data.T, rcond=None)[0]  # (b, n): z₀'', φ''[, θ'']
-    c = corners_of(vehicle)
+    c = vehicle.corners
     cols = [np.ones(c.count), -c.x_m, c.y_m][: rows.shape[1]]
     return (np.column_stack(cols) @ body).T, stage_vehicle(vehicle), tuple(range(c.count))
 
@@ -73,7 +70,7 @@ def gyro_sign_problem(y: np.ndarray, fs_hz: float, vehicle: AnyVehicle,
 
     def model_cross(freq_hz: np.ndarray) -> np.ndarray:
         model = VehicleSpectrum(vehicle, range(len(kinds)), freq_hz, fs_hz, float(speed_mps), aliases=0)
-        theta = model.theta(_nominal(vehicle), 1.0, np.full(len(kinds), 1e-12))
+        theta = model.theta(vehicle.body_values, 1.0, np.full(len(kinds), 1e-12))
         S, _ = model.spectrum(theta, derivatives=False)
         return S[:, accels][:, :, gyros]
 
@@ -89,14 +86,6 @@ def gyro_sign_problem(y: np.ndarray, fs_hz: float, vehicle: AnyVehicle,
     return (f"{label} reads the {motion} rate with the sign opposite to REP 103's ({convention}; its "
             f"cross-spectrum with the accelerometer correlates {score:+.2f} with the model's): check the "
             "IMU's frame (x forward, y left, z up)")
-
-
-def _nominal(v: AnyVehicle) -> np.ndarray:
-    """The vehicle file's body parameters in the model's order (:mod:`..body_parameters`)."""
-    if isinstance(v, FullVehicle):
-        return np.array([v.sprung_mass_kg, v.roll_inertia_kgm2, v.pitch_inertia_kgm2, v.cog_from_front_axle_m,
-                         v.cog_lateral_m])
-    return np.array([v.sprung_mass_kg, v.pitch_inertia_kgm2, v.cog_from_front_axle_m])
 
 
 _AXES = {"gyro_x": ("roll", "angular_velocity.x positive when the left side rises"),

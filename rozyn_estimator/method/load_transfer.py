@@ -28,7 +28,6 @@ constant.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable
 from typing import TypeVar
 
@@ -36,10 +35,8 @@ import numpy as np
 from scipy import fft
 from scipy.signal import butter, sosfiltfilt
 
-from rozyn_estimator.body_model import pitch_index, second_order_model, sensor_rates, sensor_rows
+from rozyn_estimator.body_model import AnyVehicle, pitch_index, second_order_model, sensor_rates, sensor_rows
 from rozyn_estimator.errors import ConfigError
-from rozyn_estimator.vehicle import Vehicle
-from rozyn_estimator.vehicle_full import FullVehicle
 
 # the longitudinal acceleration's band (zero-phase 2nd-order Butterworth): well above the body's
 # modes, which it would otherwise dim (at 3 Hz the pitch mode's response lost 7 %)
@@ -49,7 +46,7 @@ NEGLIGIBLE = 1e-3  # a response below this share of the window's rms is not remo
 E = TypeVar("E")
 
 
-def carries_load_transfer(vehicle: Vehicle | FullVehicle, speed_mps: float | np.ndarray | None) -> bool:
+def carries_load_transfer(vehicle: AnyVehicle, speed_mps: float | np.ndarray | None) -> bool:
     """Whether there is a load transfer to remove: the vehicle gives its CoG's height and the
     speed is given per sample."""
     return vehicle.cog_height_m > 0.0 and isinstance(speed_mps, np.ndarray) and speed_mps.ndim == 1
@@ -63,18 +60,7 @@ def longitudinal_acceleration_mps2(speed_mps: np.ndarray, fs_hz: float) -> np.nd
     return np.asarray(sosfiltfilt(butter(2, ACCEL_LOWPASS_HZ, fs=fs_hz, output="sos"), accel))
 
 
-def with_params(vehicle: Vehicle | FullVehicle, params: np.ndarray) -> Vehicle | FullVehicle:
-    """``vehicle`` with the estimated parameters (half car m, I_yy, l_f; full car m, I_xx, I_yy,
-    l_f, y_c); ConfigError where they are not a vehicle."""
-    p = [float(x) for x in params]
-    if isinstance(vehicle, FullVehicle):
-        return dataclasses.replace(vehicle, sprung_mass_kg=p[0], roll_inertia_kgm2=p[1],
-                                   pitch_inertia_kgm2=p[2], cog_from_front_axle_m=p[3], cog_lateral_m=p[4])
-    return dataclasses.replace(vehicle, sprung_mass_kg=p[0], pitch_inertia_kgm2=p[1],
-                               cog_from_front_axle_m=p[2])
-
-
-def load_transfer_mps2(vehicle: Vehicle | FullVehicle, accel_x_mps2: np.ndarray, fs_hz: float,
+def load_transfer_mps2(vehicle: AnyVehicle, accel_x_mps2: np.ndarray, fs_hz: float,
                        columns: tuple[int, ...] | None = None) -> np.ndarray:
     """(n, sensors) the body's vertical acceleration at the sensors (a gyro's rate; the full car's:
     those of ``columns``, default all four) from the load transfer of the longitudinal acceleration
@@ -97,14 +83,14 @@ def load_transfer_mps2(vehicle: Vehicle | FullVehicle, accel_x_mps2: np.ndarray,
     return fft.irfft(spectrum, nfft, axis=0)[:n]
 
 
-def predicted_mps2(fs_hz: float, vehicle: Vehicle | FullVehicle, params: np.ndarray, accel_x_mps2: np.ndarray,
+def predicted_mps2(fs_hz: float, vehicle: AnyVehicle, params: np.ndarray, accel_x_mps2: np.ndarray,
                    columns: tuple[int, ...] | None = None) -> np.ndarray:
     """The load transfer's response at the sensors predicted at ``params``, demeaned."""
-    y = load_transfer_mps2(with_params(vehicle, params), accel_x_mps2, fs_hz, columns)
+    y = load_transfer_mps2(vehicle.with_body_values(params), accel_x_mps2, fs_hz, columns)
     return y - y.mean(axis=0)
 
 
-def fit_without_load_transfer(accel_mps2: np.ndarray, fs_hz: float, vehicle: Vehicle | FullVehicle,
+def fit_without_load_transfer(accel_mps2: np.ndarray, fs_hz: float, vehicle: AnyVehicle,
                               speed_mps: np.ndarray, start: np.ndarray | None,
                               fit: Callable[[np.ndarray, E | None], E],
                               params_of: Callable[[E], np.ndarray | None],
@@ -113,7 +99,7 @@ def fit_without_load_transfer(accel_mps2: np.ndarray, fs_hz: float, vehicle: Veh
     ``start`` (None: the vehicle file's values) and, where the fit lands more than
     :data:`REPREDICT` away, at the fit (``warm`` the first fit; None: the caller's own)."""
     accel_x = longitudinal_acceleration_mps2(speed_mps, fs_hz)
-    nominal = _nominal(vehicle)
+    nominal = vehicle.body_values
     point = nominal if start is None or not _usable(vehicle, start) else np.asarray(start, dtype=float)
     response = predicted_mps2(fs_hz, vehicle, point, accel_x, columns)
     if np.sqrt(np.mean(response**2)) <= NEGLIGIBLE * np.sqrt(np.mean(accel_mps2**2)):
@@ -125,24 +111,17 @@ def fit_without_load_transfer(accel_mps2: np.ndarray, fs_hz: float, vehicle: Veh
     return est
 
 
-def _nominal(vehicle: Vehicle | FullVehicle) -> np.ndarray:
-    if isinstance(vehicle, FullVehicle):
-        return np.array([vehicle.sprung_mass_kg, vehicle.roll_inertia_kgm2, vehicle.pitch_inertia_kgm2,
-                         vehicle.cog_from_front_axle_m, vehicle.cog_lateral_m])
-    return np.array([vehicle.sprung_mass_kg, vehicle.pitch_inertia_kgm2, vehicle.cog_from_front_axle_m])
-
-
-def _usable(vehicle: Vehicle | FullVehicle, params: np.ndarray) -> bool:
+def _usable(vehicle: AnyVehicle, params: np.ndarray) -> bool:
     """Whether ``params`` make a vehicle (finite, in range, no zero for the ratio)."""
     p = np.asarray(params, dtype=float)
-    if p.shape != _nominal(vehicle).shape or not np.all(np.isfinite(p)) or np.any(p[:3] <= 0.0):
+    if p.shape != vehicle.body_values.shape or not np.all(np.isfinite(p)) or np.any(p[:3] <= 0.0):
         return False
     try:
-        with_params(vehicle, p)
+        vehicle.with_body_values(p)
     except ConfigError:
         return False
     return True
 
 
 __all__ = ["ACCEL_LOWPASS_HZ", "carries_load_transfer", "fit_without_load_transfer", "load_transfer_mps2",
-           "longitudinal_acceleration_mps2", "predicted_mps2", "with_params"]
+           "longitudinal_acceleration_mps2", "predicted_mps2"]

@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from rozyn_estimator.body_model import AnyVehicle, rolls
+from rozyn_estimator.body_model import AnyVehicle
 from rozyn_estimator.method.config import PipelineConfig
 from rozyn_estimator.method.correlation import correlation_sums, lag_range
 from rozyn_estimator.method.fit import fit_inertia
@@ -75,7 +75,7 @@ def rozyn_fit(y: np.ndarray, fs_hz: float, v: AnyVehicle, cfg: PipelineConfig, s
     demeaned window ``y`` whose columns are the vehicle's accelerometers ``sensors`` (None:
     all); raises InputError, IdentificationError or LinAlgError where the stage cannot."""
     n, dt = y.shape[0], 1.0 / fs_hz
-    if rolls(v):  # the full car's decays are always the multi-reference ones
+    if v.ROLLS:  # the full car's decays are always the multi-reference ones
         cfg = cfg.replace(correlation="multi-reference")
     first, last = lag_range(cfg, fs_hz, v, speed_mps)
     p_blocks = _p_blocks(cfg, v, y.shape[1])
@@ -120,7 +120,7 @@ def fit_correlations(corr: np.ndarray, first: int, fs_hz: float, v: AnyVehicle, 
 def _p_blocks(cfg: PipelineConfig, v: AnyVehicle, channels: int) -> int:
     """Pseudo-measurement blocks ``p = γ 2n/m`` (eq 2-5) for ``channels`` sensors: the full car's
     ``n`` at least its seven degrees of freedom."""
-    return math.ceil(cfg.gamma * 2 * (max(cfg.n_dof, N_DOF_FULL) if rolls(v) else cfg.n_dof) / channels)
+    return math.ceil(cfg.gamma * 2 * (max(cfg.n_dof, N_DOF_FULL) if v.ROLLS else cfg.n_dof) / channels)
 
 
 def _fitted(modes: list[Mode], v: AnyVehicle, cfg: PipelineConfig, sensors: tuple[int, ...] | None,
@@ -128,7 +128,7 @@ def _fitted(modes: list[Mode], v: AnyVehicle, cfg: PipelineConfig, sensors: tupl
     """(the body parameters, the body modes) from identified ``modes``: the half car's two and
     ``cfg.fit`` (the thesis' stiffness-block fit is the half car's), the full car's three and
     the modal fit; with ``near``, the modes closest to those (a jackknife replicate)."""
-    n_modes, kind = (3, "modal") if rolls(v) else (2, cfg.fit)
+    n_modes, kind = (3, "modal") if v.ROLLS else (2, cfg.fit)
     body = select_body_modes(modes, cfg.freq_band_hz, cfg.damping_band, n_modes=n_modes, near=near)
     return fit_inertia(v, body, cfg.stiffness_model, kind, sensors), tuple(body)
 

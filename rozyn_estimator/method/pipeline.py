@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from rozyn_estimator.body_model import AnyVehicle, rolls
+from rozyn_estimator.body_model import AnyVehicle
 from rozyn_estimator.method.budget import Budget, Calibration, rozyn_contributions
 from rozyn_estimator.method.config import FULL_PARAM_NAMES, PARAM_NAMES, PipelineConfig
 from rozyn_estimator.method.drive import constant_speed_only, varying_drive, window_speed
@@ -156,7 +156,7 @@ def estimate(
     """
     cfg, started, accel = config or PipelineConfig(), time.perf_counter(), np.asarray(accel_mps2)
     names = tuple(vehicle.channel_names if sensors is None else sensors)
-    base: dict[str, Any] = {"sensors": names, "names": FULL_PARAM_NAMES if rolls(vehicle) else PARAM_NAMES}
+    base: dict[str, Any] = {"sensors": names, "names": FULL_PARAM_NAMES if vehicle.ROLLS else PARAM_NAMES}
     try:
         index = _sensor_indices(names, vehicle)
         y, gated = checked_window(accel, fs_hz, cfg, names)
@@ -308,7 +308,7 @@ def _sensor_indices(sensors: tuple[str, ...], vehicle: AnyVehicle) -> tuple[int,
     if sensors == vehicle.channel_names:
         return tuple(range(len(sensors)))
     got = ", ".join(sensors) or "none"
-    if rolls(vehicle) and vehicle.sensors is None:
+    if vehicle.ROLLS and vehicle.sensors is None:
         if any(s not in CORNERS for s in sensors) or len(set(sensors)) != len(sensors) or len(sensors) < 3:
             raise InputError(f"full car: sensors must be 3 or 4 distinct corners of {', '.join(CORNERS)}; "
                              f"got {got}")

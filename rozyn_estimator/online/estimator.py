@@ -142,7 +142,7 @@ class OnlineEstimator:
         Raises:
             ConfigError: a vehicle of the other model (half or full car).
         """
-        if isinstance(vehicle, FullVehicle) != self._layout.full:
+        if self._layout.full != vehicle.ROLLS:
             raise ConfigError("the vehicle model (half or full car) cannot change while running")
         with self._lock:
             self._vehicle, self._config, self._pipeline = vehicle, config, pipeline

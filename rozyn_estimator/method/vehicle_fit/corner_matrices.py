@@ -8,14 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from rozyn_estimator.body_model import AnyVehicle, corner_count, corners_of
-from rozyn_estimator.vehicle_full import FullVehicle
+from rozyn_estimator.body_model import AnyVehicle, corner_count
 
 
 def bar_pairs(v: AnyVehicle) -> list[tuple[int, float]]:
     """The anti-roll bars as (the first of the two corners they join, the track they span [m]):
     the full car's front and rear axles; the half car has none."""
-    return [(0, v.track_front_m), (2, v.track_rear_m)] if isinstance(v, FullVehicle) else []
+    return [(bar.first, bar.track_m) for bar in v.corners.bars]
 
 
 def corner_matrices(v: AnyVehicle, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -44,17 +43,10 @@ def axle_inverse(n: np.ndarray) -> np.ndarray:
     return out
 
 
-CORNER_VALUES = ("suspension_stiffness_npm", "suspension_damping_nspm", "tyre_stiffness_npm",
-                 "tyre_damping_nspm", "unsprung_mass_kg", "anti_roll_stiffness_front_nmprad",
-                 "anti_roll_stiffness_rear_nmprad")
-"""The values :func:`corner_matrices` depends on beside the geometry: each corner's five, then
-each bar's (the full car's two; :func:`bar_pairs`)."""
-
-
 def _corner_parts(v: AnyVehicle, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(``s`` (F, 1), ``Z_s`` (F, c, c) with the bars, ``Z_t``'s diagonal (F, c), ``A = N⁻¹``)
     of the corners at ``s``: what the derivatives below share."""
-    c = corners_of(v)
+    c = v.corners
     s = np.asarray(s)[:, None]
     eye = np.eye(c.count)
     zs = (c.suspension_stiffness_npm + s * c.suspension_damping_nspm)[:, :, None] * eye + c.bars_npm
@@ -64,14 +56,15 @@ def _corner_parts(v: AnyVehicle, s: np.ndarray) -> tuple[np.ndarray, np.ndarray,
 
 
 def corner_value_count(v: AnyVehicle) -> int:
-    """The length of a direction of :data:`CORNER_VALUES` (five per corner, one per bar)."""
+    """The length of a direction of the corner values (:attr:`~rozyn_estimator.corners.Corners.values`:
+    five per corner, one per bar)."""
     return 5 * corner_count(v) + len(bar_pairs(v))
 
 
 def corner_matrix_derivatives(v: AnyVehicle, s: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray,
                                                                                               np.ndarray]:
     """``(dZ, dT)`` (G, F, c, c) of :func:`corner_matrices` along ``directions`` (G,
-    :func:`corner_value_count`): per direction the change of the :data:`CORNER_VALUES` (each
+    :func:`corner_value_count`): per direction the change of the corner values (each
     corner's for the first five, then the bars'). With ``A = N⁻¹``: ``dZ = dZ_s - dZ_s A Z_s -
     Z_s A dZ_s + Z_s A dN A Z_s`` and ``dT = (dZ_s - Z_s A dN) A Z_t + Z_s A dZ_t`` (``N``,
     ``Z_s`` symmetric, so ``Z_s A = (A Z_s)ᵀ``)."""

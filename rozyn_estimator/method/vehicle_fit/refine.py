@@ -54,7 +54,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.optimize import OptimizeResult
 
-from rozyn_estimator.body_model import AnyVehicle, corners_of, rolls
+from rozyn_estimator.body_model import AnyVehicle
 from rozyn_estimator.method.information import information_lost
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.fitcheck import neighbour_correlation, unsteady_fit
@@ -140,7 +140,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
     power = band_power(spectra)
     # the full car's means over neighbouring bins save work; the half car's two channels are
     # cheap per bin, and there the means cost 4 % of the mass' precision (measured)
-    step = max(1, int(GROUP_HZ * y.shape[0] / fs + 1e-9)) if rolls(vehicle) else 1
+    step = max(1, int(GROUP_HZ * y.shape[0] / fs + 1e-9)) if vehicle.ROLLS else 1
     freq, periodogram, counts = grouped(spectra.freq_hz, spectra.periodogram, step)
     kernel = kernel_m2(y.shape[0], fs, cfg.taper, counts)
     groups = sensor_groups(vehicle, sensors) if cfg.self_calibrate else ()
@@ -153,7 +153,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
                             road_shape_terms=cfg.road_shape_terms, min_noise_psd=_MIN_NOISE * power,
                             kernel_m2_hz2=kernel, road_max_cpm=cfg.road_max_cpm,
                             sensor_values=None if assumed is None else assumed.values,
-                            grid_hz=0.0 if _noise_free(warm, power, rolls(vehicle)) else cfg.grid_hz,
+                            grid_hz=0.0 if _noise_free(warm, power, vehicle.ROLLS) else cfg.grid_hz,
                             sample_weights=window_weights(y.shape[0], cfg.taper, vehicle.wheelbase_m, v, fs,
                                                           cfg.ramp_s))
     objective = WhittleObjective(model, periodogram, counts)
@@ -378,7 +378,7 @@ def _grid_start(model: VehicleSpectrum, objective: WhittleObjective, power: np.n
     """θ at the best point of a coarse grid: heave, pitch and (the full car) roll frequencies on
     the corners' static stiffness (suspension in series with tyre, the bars in roll), the CoG at
     mid-wheelbase; the half car's CoG at 30, 45 and 60 % of it instead of the roll."""
-    c = corners_of(v)
+    c = v.corners
     ks, kt = c.suspension_stiffness_npm, c.tyre_stiffness_npm
     k = ks * kt / (ks + kt)
     roll = float(k @ c.y_m**2) + float(c.bars_npm.diagonal() @ (2 * c.y_m) ** 2) / 2  # the bars' K = k t²

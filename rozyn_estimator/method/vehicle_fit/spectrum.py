@@ -34,7 +34,7 @@ import numpy as np
 from numpy.polynomial import legendre
 from scipy import sparse
 
-from rozyn_estimator.body_model import AnyVehicle, channel_rows, corners_of, rolls
+from rozyn_estimator.body_model import AnyVehicle, channel_rows
 from rozyn_estimator.gravity import gravity_height_m
 from rozyn_estimator.method.body_parameters import BodyParameters
 from rozyn_estimator.method.likelihood.road_input import (
@@ -48,7 +48,6 @@ from rozyn_estimator.method.likelihood.road_input import (
 from rozyn_estimator.method.vehicle_fit.corner_matrices import corner_matrices, corner_response_derivatives
 from rozyn_estimator.method.vehicle_fit.grid import ALIAS_SPACING_HZ, alias_map, apply, evaluation_map
 from rozyn_estimator.method.vehicle_fit.uncertainty import sensing as sensor_model
-from rozyn_estimator.vehicle_full import FullVehicle
 
 
 class VehicleSpectrum:
@@ -120,7 +119,7 @@ class VehicleSpectrum:
         self.shape_basis = np.array([legendre.legval(x, np.eye(road_shape_terms + 2)[d])
                                      for d in range(2, road_shape_terms + 2)]).reshape(road_shape_terms, -1)
         self.min_noise_psd = np.zeros(self.k) if min_noise_psd is None else np.asarray(min_noise_psd, float)
-        self.rolls = rolls(vehicle)  # two tracks and the body's roll, or the half car's one track
+        self.rolls = vehicle.ROLLS  # two tracks and the body's roll, or the half car's one track
         self.wheelbase_m = vehicle.wheelbase_m  # l_f's scale in θ: kept when the budget moves the vehicle
         self.body = BodyParameters(self.wheelbase_m, self.rolls)
         self.n_body = nb = self.body.size
@@ -177,8 +176,8 @@ class VehicleSpectrum:
         (k,) or (F, k) multiplies each channel's response (a sensor's gain or delay)."""
         v = self.vehicle = vehicle
         w = self.omega
-        c = corners_of(v)
-        track_m = v.track_front_m if isinstance(v, FullVehicle) else 0.0  # the tracks' coherence's scale
+        c = v.corners
+        track_m = v.coherence_track_m
         corners = (*(np.asarray(x).tobytes() for x in vars(c).values()), v.wheelbase_m, track_m,
                    gravity_height_m(v))
         if corners != getattr(self, "_corners", None):  # the sensors alone moved: the corners stand

@@ -27,7 +27,6 @@ import numpy as np
 
 from rozyn_estimator.method.likelihood.road_input import delay_slope, track_coherence
 from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum, herm
-from rozyn_estimator.vehicle_full import FullVehicle
 
 GEOMETRY = ("wheelbase_m", "track_front_m", "track_rear_m")
 _BAR = {"track_front_m": (20, "anti_roll_stiffness_front_nmprad"),
@@ -38,7 +37,7 @@ def geometry_derivatives(model: VehicleSpectrum, theta: np.ndarray, keys: Sequen
     """dS (G, nodes, k, k) at θ per metre of each of ``keys`` (of :data:`GEOMETRY`); on a varying
     drive (the road's mixture over the window's delays and speeds) by central differences."""
     v = model.vehicle
-    if not isinstance(v, FullVehicle):
+    if not v.ROLLS:
         raise TypeError("the geometry's derivatives are the full car's (the half car's budget is its own)")
     if model.mixture is not None:
         return np.array([_difference(model, theta, key) for key in keys])
@@ -67,7 +66,7 @@ def geometry_derivatives(model: VehicleSpectrum, theta: np.ndarray, keys: Sequen
             d_inputs = model.road_weight(theta)[:, None, None] * model.road_inputs(gamma, delay=d_delay)
             part[g] += sensing @ H @ d_inputs @ herm(H) @ herm(sensing)
         elif key == "track_front_m":
-            part[g] += sensing @ d_motion @ herm(sensing) / v.track_front_m
+            part[g] += sensing @ d_motion @ herm(sensing) / v.coherence_track_m  # the coherence's scale
     out = model.fold(part)
     bars = [(g, *_BAR[key], getattr(v, key)) for g, key in enumerate(keys)
             if key in _BAR and getattr(v, _BAR[key][1]) != 0]

@@ -16,22 +16,14 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from rozyn_estimator.body_model import AnyVehicle, corners_of
-from rozyn_estimator.method.vehicle_fit.corner_matrices import CORNER_VALUES
+from rozyn_estimator.body_model import AnyVehicle
 from rozyn_estimator.tolerances import HEIGHT_KEYS
-from rozyn_estimator.vehicle_full import FullVehicle
 
 REL_STEP = 1e-5  # share of a value
 ABS_STEP = 1e-6  # m, s or share of a gain
 _QUADS = {"suspension_stiffness": "suspension_stiffness_npm", "suspension_damping": "suspension_damping_nspm",
           "tyre_stiffness": "tyre_stiffness_npm", "tyre_damping": "tyre_damping_nspm",
           "unsprung_mass": "unsprung_mass_kg"}
-AXLE = {"front": (0, 1), "rear": (2, 3)}
-_HALF_AXLE = {"front": (0,), "rear": (1,)}
-# the half car's corner values: its tolerance keys are its fields
-_HALF_CORNERS = tuple(f"{name.rsplit('_', 1)[0]}_{axle}_{name.rsplit('_', 1)[1]}"
-                      for name in CORNER_VALUES[:5] for axle in ("front", "rear"))
-_HALF_SENSORS = ("sensor_front_offset_m", "sensor_rear_offset_m")
 
 VehicleMove = Callable[[float], AnyVehicle]
 V = TypeVar("V", bound=AnyVehicle)
@@ -40,7 +32,7 @@ V = TypeVar("V", bound=AnyVehicle)
 def axle_channels(v: AnyVehicle, axle: str) -> tuple[int, ...]:
     """The vehicle's channel slots on ``axle`` (``front``, ``rear``): the full car's two corners',
     the half car's one."""
-    return (AXLE if isinstance(v, FullVehicle) else _HALF_AXLE)[axle]
+    return tuple(v.AXLE_SLOTS[axle])
 
 
 def axle_of(v: AnyVehicle, channel: int) -> str:
@@ -48,25 +40,11 @@ def axle_of(v: AnyVehicle, channel: int) -> str:
     return "front" if channel in axle_channels(v, "front") else "rear"
 
 
-def corner_fields(v: AnyVehicle) -> tuple[str, ...]:
-    """The vehicle's fields that hold its corner values."""
-    return CORNER_VALUES if isinstance(v, FullVehicle) else _HALF_CORNERS
-
-
-def sensor_fields(v: AnyVehicle) -> tuple[str, ...]:
-    """The vehicle's fields that hold its sensors' positions."""
-    return ("sensor_x_m", "sensor_y_m") if isinstance(v, FullVehicle) else _HALF_SENSORS
-
-
 def values_of(v: AnyVehicle) -> np.ndarray:
     """The corner values, flat: each corner's (suspension stiffness, damping, tyre stiffness,
     damping, unsprung mass) by quantity, then the full car's bars [N m/rad] (the directions of
     :func:`~rozyn_estimator.method.vehicle_fit.corner_matrices.corner_response_derivatives`)."""
-    c = corners_of(v)
-    bars = [v.anti_roll_stiffness_front_nmprad, v.anti_roll_stiffness_rear_nmprad] \
-        if isinstance(v, FullVehicle) else []
-    return np.concatenate([c.suspension_stiffness_npm, c.suspension_damping_nspm, c.tyre_stiffness_npm,
-                           c.tyre_damping_nspm, c.unsprung_mass_kg, bars]).astype(float)
+    return v.corners.values
 
 
 def moved_copy(v: AnyVehicle, **changes: Any) -> Any:
@@ -80,12 +58,7 @@ def moved_copy(v: AnyVehicle, **changes: Any) -> Any:
 
 def shifted_sensor(v: AnyVehicle, channel: int, h: float) -> AnyVehicle:
     """``v`` with the sensor of channel slot ``channel`` ``h`` metres further back."""
-    if not isinstance(v, FullVehicle):
-        field = _HALF_SENSORS[channel]
-        return moved_copy(v, **{field: getattr(v, field) + h})
-    xs = list(v.sensor_x_m)
-    xs[channel] += h
-    return moved_copy(v, sensor_x_m=tuple(xs))
+    return moved_copy(v, **v.sensor_shift(channel, h))
 
 
 def vehicle_moves(v: V, key: str,
@@ -96,24 +69,24 @@ def vehicle_moves(v: V, key: str,
     keys (the sensors' offsets, gains and timing: each budget moves those its own way)."""
     if key in ("wheelbase_m", "track_front_m", "track_rear_m", *HEIGHT_KEYS):
         return [(key, ABS_STEP, lambda h: moved_copy(v, **{key: getattr(v, key) + h}))]
-    if not isinstance(v, FullVehicle):
-        if key in _HALF_CORNERS:
-            return [(key, REL_STEP, lambda h: moved_copy(v, **{key: getattr(v, key) * (1 + h)}))]
-        return None
-    return _full_moves(v, key, sensors)  # type: ignore[return-value]  # V is FullVehicle here
+    if key in v.CORNER_FIELDS:  # a value of its own (the half car's corners, the full car's bars)
+        value = getattr(v, key)
+        return [] if value == 0 else [(key, REL_STEP, lambda h: moved_copy(v, **{key: value * (1 + h)}))]
+    return _axle_moves(v, key, sensors)
 
 
-def _full_moves(v: FullVehicle, key: str,
-                sensors: Sequence[int]) -> list[tuple[str, float, VehicleMove]] | None:
-    """:func:`vehicle_moves` of the full car's keys."""
-    def scaled(quad: str, corners: tuple[int, ...], h: float) -> FullVehicle:
+def _axle_moves(v: V, key: str,
+                sensors: Sequence[int]) -> list[tuple[str, float, Callable[[float], V]]] | None:
+    """:func:`vehicle_moves` of the keys that name a share of an axle's corners' values and the
+    sensors' lateral positions (the full car's tolerances)."""
+    def scaled(quad: str, corners: tuple[int, ...], h: float) -> V:
         values = list(getattr(v, quad))
         for c in corners:
             values[c] *= 1.0 + h
         return moved_copy(v, **{quad: tuple(values)})
 
-    def lateral(c: int) -> VehicleMove:
-        def move(h: float) -> FullVehicle:
+    def lateral(c: int) -> Callable[[float], V]:
+        def move(h: float) -> V:
             ys = list(v.sensor_y_m)
             ys[c] += h
             return moved_copy(v, sensor_y_m=tuple(ys))
@@ -122,10 +95,7 @@ def _full_moves(v: FullVehicle, key: str,
     axle = "front" if "_front" in key else "rear"
     quad = next((q for k, q in _QUADS.items() if key.startswith(k)), None)
     if quad is not None:
-        return [(key, REL_STEP, lambda h: scaled(quad, AXLE[axle], h))]
-    if key.startswith("anti_roll"):
-        bar = getattr(v, key)
-        return [] if bar == 0 else [(key, REL_STEP, lambda h: moved_copy(v, **{key: bar * (1 + h)}))]
+        return [(key, REL_STEP, lambda h: scaled(quad, v.AXLE_SLOTS[axle], h))]
     if key == "sensor_lateral_m":
         return [(f"{key}[{v.channel_names[c]}]", ABS_STEP, lateral(c)) for c in sensors
                 if v.channel_kinds[c] == "accel_z"]  # a gyro reads the same rotation anywhere

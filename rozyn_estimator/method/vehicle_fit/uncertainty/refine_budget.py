@@ -39,14 +39,11 @@ from rozyn_estimator.method.vehicle_fit.uncertainty.moves import (
     ABS_STEP,
     VehicleMove,
     axle_channels,
-    corner_fields,
-    sensor_fields,
     shifted_sensor,
     values_of,
     vehicle_moves,
 )
 from rozyn_estimator.method.vehicle_fit.whittle import WhittleObjective
-from rozyn_estimator.vehicle_full import FullVehicle
 
 # a move: the step -> (the vehicle moved, a factor per channel (F, k) or None)
 Move = Callable[[float], tuple[AnyVehicle, np.ndarray | None]]
@@ -74,7 +71,7 @@ def refinement_contributions(objective: WhittleObjective, theta: np.ndarray, the
         derivatives = model.sensing_derivatives(theta, np.array([d for _, d in sensor_moves]))
         changes.update(zip([name for name, _ in sensor_moves], derivatives, strict=True))
     geometry = [name for name in order if name in GEOMETRY and name not in changes] \
-        if isinstance(vehicle, FullVehicle) else []  # the half car's: stepped
+        if vehicle.ROLLS else []  # the half car's: stepped
     if geometry:
         changes.update(zip(geometry, geometry_derivatives(model, theta, geometry), strict=True))
     for name, step, (moved, factor), _ in moves:
@@ -94,7 +91,7 @@ def _corner_direction(base: AnyVehicle, moved: AnyVehicle, factor: np.ndarray | 
                       step: float) -> np.ndarray | None:
     """The move's change of the corners' values per unit step (:func:`.moves.values_of`), or
     None when it moves anything else."""
-    if factor is not None or not _moves_only(base, moved, corner_fields(base)):
+    if factor is not None or not _moves_only(base, moved, base.CORNER_FIELDS):
         return None
     return (values_of(moved) - values_of(base)) / step
 
@@ -103,7 +100,7 @@ def _sensor_change(model: VehicleSpectrum, base: AnyVehicle, moved: AnyVehicle, 
                    step: float) -> np.ndarray | None:
     """(F, k, b) the move's change of the sensing per unit step, or None when it moves
     anything but the sensors' positions (and their channels' factors)."""
-    if not _moves_only(base, moved, sensor_fields(base)):
+    if not _moves_only(base, moved, base.SENSOR_FIELDS):
         return None
     return (model.sensing_of(moved, factor) - model.sensing) / step
 
