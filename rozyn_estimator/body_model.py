@@ -58,9 +58,15 @@ class SecondOrderModel:
         return int(self.mass.shape[0])
 
 
+def body_inertias(v: AnyVehicle) -> np.ndarray:
+    """The body's (m, I_yy[, I_xx]) [kg, kg m²], in ``q``'s order (its heave, pitch, roll)."""
+    b = v.body_values  # m, [I_xx,] I_yy, l_f[, y_c]: the likelihood's order
+    return np.array([b[0], b[2], b[1]]) if v.ROLLS else b[:2]
+
+
 def corner_count(v: AnyVehicle) -> int:
     """How many corners (wheels, tyres) the vehicle stands on."""
-    return len(v.AXLE_SLOTS["front"]) + len(v.AXLE_SLOTS["rear"])
+    return v.CORNER_COUNT
 
 
 def heave_index(v: AnyVehicle) -> int:
@@ -75,7 +81,7 @@ def pitch_index(v: AnyVehicle) -> int:
 
 def dof(v: AnyVehicle) -> int:
     """The length of ``q``: the wheels and the body's two or three coordinates."""
-    return corner_count(v) + len(v.body_inertias)
+    return corner_count(v) + len(body_inertias(v))
 
 
 def body_rows(v: AnyVehicle, points_m: np.ndarray) -> np.ndarray:
@@ -119,7 +125,7 @@ def second_order_model(v: AnyVehicle) -> SecondOrderModel:
 
     stiffness = on_corners(c.suspension_stiffness_npm, c.tyre_stiffness_npm, c.bars_npm)
     damping = on_corners(c.suspension_damping_nspm, c.tyre_damping_nspm, np.zeros_like(c.bars_npm))
-    mass = np.diag(np.concatenate([c.unsprung_mass_kg, v.body_inertias]))
+    mass = np.diag(np.concatenate([c.unsprung_mass_kg, body_inertias(v)]))
     h = gravity_height_m(v)  # the weight through the geometry (0 where the heights are not given)
     for k in range(heave_index(v) + 1, dof(v)):  # pitch and roll alike
         stiffness[k, k] += rotation_stiffness_nmprad(v.sprung_mass_kg, h)
@@ -168,6 +174,6 @@ def sensor_points(v: AnyVehicle) -> np.ndarray:
     return np.column_stack([v.sensor_x_m, v.sensor_y_m])
 
 
-__all__ = ["GYRO_ROWS", "AnyVehicle", "Corners", "SecondOrderModel", "body_rows",
+__all__ = ["GYRO_ROWS", "AnyVehicle", "Corners", "SecondOrderModel", "body_inertias", "body_rows",
            "channel_rows", "corner_count", "dof", "heave_index", "pitch_index",
            "second_order_model", "sensor_points", "sensor_rates", "sensor_rows", "suspension_rows"]

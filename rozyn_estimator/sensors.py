@@ -173,13 +173,14 @@ def sensors_from_parameters(values: Mapping[str, Any]) -> SensorSet | None:
     return sensors_from_mapping(block, "vehicle parameters")
 
 
-def half_car_channels(sensors: SensorSet, wheelbase_m: float) -> tuple[Channel, Channel]:
-    """The two channels the half car fits, accelerometer first; ConfigError (one line naming
-    what is missing) for a set that cannot identify the mass, the pitch inertia and the CoG.
+def half_car_channels(sensors: SensorSet, wheelbase_m: float) -> tuple[Channel, ...]:
+    """The channels the half car fits: the block's accelerometers front to rear, then its pitch
+    gyros; ConfigError (one line naming what is missing) for a set that cannot identify the
+    mass, the pitch inertia and the CoG.
 
-    The half car has no roll: its sensors sit on the centreline and give no ``gyro_x``. It
-    fits two channels: two accelerometers at least a quarter wheelbase apart (heave and
-    pitch from their sum and difference), or one accelerometer and a pitch gyro.
+    The half car has no roll: its sensors sit on the centreline and give no ``gyro_x``. Its
+    channels must see heave (an accelerometer) and pitch (a pitch gyro, or accelerometers at
+    least a quarter wheelbase apart); any number of channels beyond that adds to what it sees.
     """
     off_line = [s.name for s in sensors.sensors if s.y_m != 0.0]
     if off_line:
@@ -191,7 +192,7 @@ def half_car_channels(sensors: SensorSet, wheelbase_m: float) -> tuple[Channel, 
     if rolls:
         raise ConfigError(f"sensors: {', '.join(rolls)}: the half car does not roll; leave gyro_x out (or "
                           "describe the car as a full car, model: full)")
-    accels = [c for c in chans if c.kind == "accel_z"]
+    accels = sorted((c for c in chans if c.kind == "accel_z"), key=lambda c: c.x_m)
     gyros = [c for c in chans if c.kind == "gyro_y"]
     if not accels:
         raise ConfigError("sensors: a pitch gyro sees pitch but not heave, so not the mass: add an accel_z "
@@ -199,20 +200,12 @@ def half_car_channels(sensors: SensorSet, wheelbase_m: float) -> tuple[Channel, 
     if len(accels) == 1 and not gyros:
         raise ConfigError(f"sensors: one accelerometer ({accels[0].label}) sees heave but not pitch: add a "
                           "gyro_y channel or a second accelerometer a quarter wheelbase away or more")
-    if len(chans) > 2:
-        raise ConfigError(f"sensors: the half car fits two channels (an accel_z and a gyro_y, or two "
-                          f"accelerometers), got {len(chans)}: {', '.join(c.label for c in chans)}")
-    if gyros:
-        return accels[0], gyros[0]
-    front, rear = sorted(accels, key=lambda c: c.x_m)
-    if rear.x_m - front.x_m < 0.25 * wheelbase_m:
+    front, rear = accels[0], accels[-1]
+    if not gyros and rear.x_m - front.x_m < 0.25 * wheelbase_m:
         raise ConfigError(f"sensors: {front.label} and {rear.label} sit {rear.x_m - front.x_m:.2f} m apart: "
-                          f"two accelerometers must be a quarter wheelbase ({0.25 * wheelbase_m:.2f} m) "
-                          "apart or more to see pitch")
-    return front, rear
-
-
-FULL_CAR_MAX_CHANNELS = 4
+                          f"accelerometers must be a quarter wheelbase ({0.25 * wheelbase_m:.2f} m) "
+                          "apart or more to see pitch (or add a gyro_y channel)")
+    return (*accels, *gyros)
 
 
 def same_positions(given: Any, placed: Sequence[float] | float) -> bool:
@@ -236,13 +229,10 @@ def full_car_channels(sensors: SensorSet, wheelbase_m: float, track_m: float) ->
     ``gyro_x`` the roll rate. The set must see all three, each well apart: the rows, with ``x``
     in wheelbases and ``y`` in tracks, must have a smallest singular value of at least 0.1
     (two accelerometers a quarter wheelbase apart along the body and one a quarter track
-    across from their line pass). At most four channels (the full car's likelihood is built
-    for three or four).
+    across from their line pass). Any number of channels from three: the likelihood is one over
+    all of them.
     """
     chans = sensors.channels
-    if len(chans) > FULL_CAR_MAX_CHANNELS:
-        raise ConfigError(f"sensors: the full car fits three or four channels, got {len(chans)}: "
-                          f"{', '.join(c.label for c in chans)}")
     accels = [c for c in chans if c.kind == "accel_z"]
     if not accels:
         raise ConfigError("sensors: gyros see pitch and roll but not heave, so not the mass: add an accel_z "
@@ -285,7 +275,6 @@ def _unseen_motion(rows: list[tuple[float, float, float]]) -> str:
 __all__ = [
     "CHANNEL_FIELDS",
     "CHANNEL_UNITS",
-    "FULL_CAR_MAX_CHANNELS",
     "SENSORS_PARAMETER_HELP",
     "SENSOR_PARAMETER_PREFIX",
     "Channel",

@@ -47,12 +47,14 @@ class Vehicle:
 
     PARAM_PREFIX: ClassVar[str] = "vehicle."
     ROLLS: ClassVar[bool] = False  # the body heaves and pitches (rozyn_estimator.body_model)
-    AXLE_SLOTS: ClassVar[Mapping[str, tuple[int, ...]]] = {"front": (0,), "rear": (1,)}  # channel slots
+    CORNER_COUNT: ClassVar[int] = 2  # the front and the rear axle
+    FRONT_SLOTS: ClassVar[tuple[int, ...]] = (0,)  # channel slots taking the front's tolerances
     CORNER_FIELDS: ClassVar[tuple[str, ...]] = tuple(  # the fields holding the corners' values
         f"{value}_{axle}_{unit}" for value, unit in (
             ("suspension_stiffness", "npm"), ("suspension_damping", "nspm"), ("tyre_stiffness", "npm"),
             ("tyre_damping", "nspm"), ("unsprung_mass", "kg")) for axle in ("front", "rear"))
-    SENSOR_FIELDS: ClassVar[tuple[str, ...]] = ("sensor_front_offset_m", "sensor_rear_offset_m")  # positions
+    SENSOR_FIELDS: ClassVar[tuple[str, ...]] = ("sensor_front_offset_m", "sensor_rear_offset_m",
+                                                "channel_x_m")  # the fields holding the sensors' positions
 
     sprung_mass_kg: float = param(1000.0, "sprung mass (the simulator's truth)", unit="kg",
                                   low=0.0, open_low=True)
@@ -92,6 +94,9 @@ class Vehicle:
     # the sensors block (rozyn_estimator.sensors; None: the two accelerometers at the offsets above).
     # Its positions are the offsets' (with_sensors): the budget perturbs those, the block names channels.
     sensors: SensorSet | None = dataclasses.field(default=None)
+    # a sensors block's channels' positions behind the front axle [m], in channels' order (with_sensors
+    # places them; the budget moves them); empty without a block
+    channel_x_m: tuple[float, ...] = dataclasses.field(default=())
 
     def __post_init__(self) -> None:
         check(self, _RULES)
@@ -121,11 +126,6 @@ class Vehicle:
         """What the estimator identifies, in the likelihood's order: (m, I_yy, l_f) [kg, kg m², m]."""
         return np.array([self.sprung_mass_kg, self.pitch_inertia_kgm2, self.cog_from_front_axle_m])
 
-    @property
-    def body_inertias(self) -> np.ndarray:
-        """The body's (m, I_yy) [kg, kg m²], in the order of its coordinates (heave, pitch)."""
-        return np.array([self.sprung_mass_kg, self.pitch_inertia_kgm2])
-
     def with_body_values(self, values: np.ndarray) -> Vehicle:
         """A copy with :attr:`body_values` replaced (validated: ConfigError where they are not a car)."""
         m, iyy, lf = (float(x) for x in values)
@@ -141,70 +141,73 @@ class Vehicle:
         Rozyn's stage reads: :mod:`rozyn_estimator.method.imu`)."""
         return self.replace(sensors=None, sensor_front_offset_m=0.0, sensor_rear_offset_m=0.0)
 
-    def sensor_shift(self, channel: int, h_m: float) -> dict[str, float]:
+    def sensor_shift(self, channel: int, h_m: float) -> dict[str, Any]:
         """The field changes that move the sensor of channel slot ``channel`` ``h_m`` further back."""
+        if self.sensors is not None:
+            return {"channel_x_m": tuple(x + h_m * (i == channel) for i, x in enumerate(self.channel_x_m))}
         field = ("sensor_front_offset_m", "sensor_rear_offset_m")[channel]
         return {field: getattr(self, field) + h_m}
 
     @property
-    def sensor_x_m(self) -> tuple[float, float]:
-        """(front, rear) sensor positions from the front axle, rearward [m]."""
+    def sensor_x_m(self) -> tuple[float, ...]:
+        """Each channel's position from the front axle, rearward [m]: the front and rear
+        accelerometers', or a sensors block's channels'."""
+        if self.sensors is not None:
+            return self.channel_x_m
         return (self.sensor_front_offset_m, self.wheelbase_m + self.sensor_rear_offset_m)
 
     @property
-    def channels(self) -> tuple[Channel, Channel]:
-        """The two channels the model fits (accelerometer first), at :attr:`sensor_x_m`."""
-        if self.sensors is None:
-            x = self.sensor_x_m
-            return Channel("front", "accel_z", "", x[0]), Channel("rear", "accel_z", "", x[1])
-        first, second = half_car_channels(self.sensors, self.wheelbase_m)
+    def channels(self) -> tuple[Channel, ...]:
+        """The channels the model fits, at :attr:`sensor_x_m`: the front and rear accelerometers,
+        or a block's (accelerometers front to rear, then gyros:
+        :func:`~rozyn_estimator.sensors.half_car_channels`)."""
         x = self.sensor_x_m
-        return dataclasses.replace(first, x_m=x[0]), dataclasses.replace(second, x_m=x[1])
-
-    @property
-    def channel_names(self) -> tuple[str, str]:
-        """How messages name the two channels: ``front``/``rear``, or a sensors block's labels."""
         if self.sensors is None:
-            return ("front", "rear")
-        first, second = self.channels
-        return first.label, second.label
+            return Channel("front", "accel_z", "", x[0]), Channel("rear", "accel_z", "", x[1])
+        chans = half_car_channels(self.sensors, self.wheelbase_m)
+        return tuple(dataclasses.replace(c, x_m=xi) for c, xi in zip(chans, x, strict=True))
 
     @property
-    def sensor_y_m(self) -> tuple[float, float]:
+    def channel_names(self) -> tuple[str, ...]:
+        """How messages name the channels: ``front``/``rear``, or a sensors block's labels."""
+        return ("front", "rear") if self.sensors is None else tuple(c.label for c in self.channels)
+
+    @property
+    def sensor_y_m(self) -> tuple[float, ...]:
         """The half car's sensors sit on its centreline: ``y = 0`` [m]."""
-        return (0.0, 0.0)
+        return (0.0,) * len(self.sensor_x_m)
 
     @property
-    def channel_kinds(self) -> tuple[str, str]:
-        """Each channel's kind: ``accel_z``, and ``accel_z`` or a pitch gyro's ``gyro_y``."""
-        return ("accel_z", "gyro_y" if self.pitch_gyro else "accel_z")
+    def channel_kinds(self) -> tuple[str, ...]:
+        """Each channel's kind: ``accel_z`` or a pitch gyro's ``gyro_y``."""
+        return ("accel_z", "accel_z") if self.sensors is None else tuple(c.kind for c in self.channels)
 
     @property
-    def channel_late(self) -> tuple[bool, bool]:
+    def channel_late(self) -> tuple[bool, ...]:
         """Each channel runs on the clock the timing tolerance (``sensor_time_offset_s``) puts
-        late: the rear sensor's, or a block's second sensor's (one IMU: neither)."""
+        late: the rear sensor's, or a block's sensors but the first's (one IMU: none)."""
         if self.sensors is None:
             return (False, True)
-        first, second = self.channels
-        return (False, second.sensor != first.sensor)
+        first = self.channels[0].sensor
+        return tuple(c.sensor != first for c in self.channels)
 
     @property
     def pitch_gyro(self) -> bool:
-        """The second channel is a pitch gyro (``gyro_y``), not an accelerometer (a valid block with
-        a gyro_y has it there: :func:`~rozyn_estimator.sensors.half_car_channels`)."""
+        """A sensors block with a pitch gyro (``gyro_y``)."""
         return self.sensors is not None and any(c.kind == "gyro_y" for c in self.sensors.channels)
 
     def with_sensors(self, sensors: SensorSet | None) -> Vehicle:
-        """A copy with the sensors of a ``sensors`` block: their positions become the offsets
-        (an IMU's both); ConfigError for a set the half car cannot use."""
+        """A copy with the sensors of a ``sensors`` block at their positions (the first two also
+        as the offsets, as a written file holds them); ConfigError for a set the half car cannot use."""
         if sensors is None:
-            return self.replace(sensors=None)
-        first, second = half_car_channels(sensors, self.wheelbase_m)
+            return self.replace(sensors=None, channel_x_m=())
+        chans = half_car_channels(sensors, self.wheelbase_m)
         tolerances = self.tolerances
-        if second.kind == "gyro_y":  # a gyro reads the same pitch anywhere: its position is no error
+        if all(c.kind == "gyro_y" for c in chans[1:]):  # a gyro reads the same pitch anywhere: no error
             tolerances = dataclasses.replace(tolerances, sensor_rear_offset_m=0.0)
-        return self.replace(sensors=sensors, sensor_front_offset_m=first.x_m,
-                            sensor_rear_offset_m=second.x_m - self.wheelbase_m, tolerances=tolerances)
+        return self.replace(sensors=sensors, sensor_front_offset_m=chans[0].x_m,
+                            sensor_rear_offset_m=chans[1].x_m - self.wheelbase_m,
+                            channel_x_m=tuple(c.x_m for c in chans), tolerances=tolerances)
 
     def replace(self, **changes: Any) -> Vehicle:
         """A copy with some fields changed (validated)."""
@@ -226,10 +229,13 @@ _RULES = (
     HEIGHTS_RULE,
     ("cog_from_front_axle_m", lambda v: 0.0 < v.cog_from_front_axle_m < v.wheelbase_m,
      "must lie between the axles (0 < lf < wheelbase_m)"),
+    ("channel_x_m",
+     lambda v: not isinstance(v.sensors, SensorSet) or len(v.channel_x_m) == len(v.sensors.channels),
+     "must hold one position per channel of the sensors block (Vehicle.with_sensors places them)"),
     ("sensors", lambda v: v.sensors is None or (isinstance(v.sensors, SensorSet) and bool(v.channels)),
      "must be a sensors block the half car can use (rozyn_estimator.sensors)"),
     ("sensor_rear_offset_m",
-     lambda v: v.pitch_gyro or v.sensor_x_m[1] - v.sensor_x_m[0] >= 0.25 * v.wheelbase_m,
+     lambda v: v.sensors is not None or v.sensor_x_m[1] - v.sensor_x_m[0] >= 0.25 * v.wheelbase_m,
      "the rear accelerometer must sit at least a quarter wheelbase behind the front one to see pitch "
      "(sensor_front_offset_m is measured from the front axle, sensor_rear_offset_m from the rear one)"),
 )

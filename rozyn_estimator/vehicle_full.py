@@ -11,17 +11,9 @@ Coordinates and signs:
 - Corners in the order FL, FR, RL, RR; every per-corner tuple and every four-channel
   array follows it. The left wheels sit at ``y = +track/2``, the right ones at ``-track/2``.
 
-Defaults (Table 5-1 extended): the thesis calls its half car's coordinates "the front
-wheels" and "the rear wheels" and ``m_t`` the "mass of the wheels" (chapter 3), with a
-1000 kg "body mass": its half car is the whole car seen from the side, each axle's two
-corners lumped. So the full car keeps the body (m 1000 kg, I_yy 2000 kg m^2, lf 1.2 m,
-wheelbase 2.8 m) and splits each axle value over its two corners: unsprung 20/32.5 kg,
-tyres 100 kN/m and 25 N s/m, suspension 22.5/40 kN/m and 1400/1750 N s/m per corner. The
-symmetric full car then has the half car's heave and pitch modes exactly, and
-:func:`centreline_half_car` of the defaults is the default :class:`Vehicle`. Tracks 1.5 m
-(a mid-size car's). Roll inertia 400 kg m^2: a roll radius of gyration of 0.63 m, 0.42
-of the track, typical of passenger cars (the pitch default has 1.41 m, half the
-wheelbase). Lateral CoG 0, no anti-roll bars; the accelerometers sit above the wheels.
+Defaults: Table 5-1's car with each axle's values split over its two corners, so that
+:func:`centreline_half_car` of the defaults is the default :class:`Vehicle` (why and the
+rest: docs/simulator.md, "Full car").
 
 Anti-roll bars are given as the roll stiffness each adds to its axle, in N*m/rad
 (:class:`rozyn_estimator.corners.Bar`).
@@ -67,6 +59,7 @@ MODEL_PARAM = Param("vehicle model: half (front and rear accelerometers, the veh
                     "model: key decides for it", choices=MODELS, read_only=True)
 """The nodes' ``vehicle.model`` parameter (default ``half``)."""
 Quad = tuple[float, float, float, float]
+Slots = tuple[float, ...]  # the sensors' positions: four corners', or a sensors block's channels'
 _POSITIVE: dict[str, Any] = {"low": 0.0, "open_low": True, "length": 4}
 
 
@@ -89,7 +82,8 @@ class FullVehicle:
 
     PARAM_PREFIX: ClassVar[str] = "vehicle."
     ROLLS: ClassVar[bool] = True  # the body heaves, pitches and rolls (rozyn_estimator.body_model)
-    AXLE_SLOTS: ClassVar[Mapping[str, tuple[int, ...]]] = {"front": (0, 1), "rear": (2, 3)}  # channel slots
+    CORNER_COUNT: ClassVar[int] = 4  # FL, FR, RL, RR
+    FRONT_SLOTS: ClassVar[tuple[int, ...]] = (0, 1)  # channel slots taking the front's tolerances
     CORNER_FIELDS: ClassVar[tuple[str, ...]] = (  # the fields holding the corners' and bars' values
         "suspension_stiffness_npm", "suspension_damping_nspm", "tyre_stiffness_npm", "tyre_damping_nspm",
         "unsprung_mass_kg", "anti_roll_stiffness_front_nmprad", "anti_roll_stiffness_rear_nmprad")
@@ -123,10 +117,10 @@ class FullVehicle:
                                                     "none)", unit="N*m/rad", low=0.0)
     anti_roll_stiffness_rear_nmprad: float = param(0.0, "roll stiffness the rear anti-roll bar adds (0: "
                                                    "none)", unit="N*m/rad", low=0.0)
-    sensor_x_m: Quad = param((0.0, 0.0, 2.8, 2.8), "accelerometers (FL, FR, RL, RR) behind the front axle",
-                             unit="m", length=4)
-    sensor_y_m: Quad = param((0.75, -0.75, 0.75, -0.75), "accelerometers (FL, FR, RL, RR) left of the "
-                             "centreline", unit="m", length=4)
+    sensor_x_m: Slots = param((0.0, 0.0, 2.8, 2.8), "accelerometers (FL, FR, RL, RR) behind the front axle "
+                              "(a sensors block: its channels')", unit="m")
+    sensor_y_m: Slots = param((0.75, -0.75, 0.75, -0.75), "accelerometers (FL, FR, RL, RR) left of the "
+                              "centreline (a sensors block: its channels')", unit="m")
     cog_height_m: float = param(0.0, "centre of gravity above the road (0, with wheel_centre_height_m 0: "
                                 "not given, and the weight's pitch and roll moments through the geometry not "
                                 "carried; rozyn_estimator.gravity)", unit="m", low=0.0)
@@ -162,11 +156,6 @@ class FullVehicle:
         return np.array([self.sprung_mass_kg, self.roll_inertia_kgm2, self.pitch_inertia_kgm2,
                          self.cog_from_front_axle_m, self.cog_lateral_m])
 
-    @property
-    def body_inertias(self) -> np.ndarray:
-        """The body's (m, I_yy, I_xx) [kg, kg m²], in the order of its coordinates (heave, pitch, roll)."""
-        return np.array([self.sprung_mass_kg, self.pitch_inertia_kgm2, self.roll_inertia_kgm2])
-
     def with_body_values(self, values: np.ndarray) -> FullVehicle:
         """A copy with :attr:`body_values` replaced (validated: ConfigError where they are not a car)."""
         m, ixx, iyy, lf, yc = (float(x) for x in values)
@@ -178,11 +167,10 @@ class FullVehicle:
         return self.track_front_m
 
     def with_corner_sensors(self) -> FullVehicle:
-        """A copy with four accelerometers above the wheels in place of any sensors block (the
-        channels Rozyn's stage reads: :mod:`rozyn_estimator.method.imu`)."""
+        """A copy with accelerometers above the wheels for any sensors block (Rozyn's stage's: method.imu)."""
         return self.replace(sensors=None, sensor_x_m=self.corner_x_m, sensor_y_m=self.corner_y_m)
 
-    def sensor_shift(self, channel: int, h_m: float) -> dict[str, tuple[float, ...]]:
+    def sensor_shift(self, channel: int, h_m: float) -> dict[str, Slots]:
         """The field changes that move the sensor of channel slot ``channel`` ``h_m`` further back."""
         return {"sensor_x_m": tuple(x + h_m * (i == channel) for i, x in enumerate(self.sensor_x_m))}
 
@@ -227,11 +215,11 @@ class FullVehicle:
 
     def with_sensors(self, sensors: SensorSet | None) -> FullVehicle:
         """A copy with a ``sensors`` block: channel ``i`` at slot ``i`` of ``sensor_x_m``/``_y_m``
-        (the rest repeat the last); one sensor has one clock (no timing tolerance)."""
+        (at least four slots: the rest repeat the last); one sensor has one clock (no timing tolerance)."""
         if sensors is None:
             return self.replace(sensors=None)
         chans = full_car_channels(sensors, self.wheelbase_m, self.track_front_m)
-        slots = [*chans, *[chans[-1]] * (4 - len(chans))]
+        slots = [*chans, *[chans[-1]] * max(0, 4 - len(chans))]
         tolerances = self.tolerances
         if len(sensors.sensors) == 1:
             tolerances = dataclasses.replace(tolerances, sensor_time_offset_s=0.0)
@@ -269,8 +257,18 @@ def _spans(v: FullVehicle) -> tuple[float, float]:
     return (x[2] + x[3] - x[0] - x[1]) / 2, (y[0] + y[2] - y[1] - y[3]) / 2
 
 
+def _slots(v: FullVehicle) -> int:
+    """How many sensor positions the vehicle holds: four corners', or one per channel of its block
+    (at least four)."""
+    return 4 if v.sensors is None else max(4, len(v.sensors.channels))
+
+
 _RULES = (
     HEIGHTS_RULE,
+    ("sensor_x_m", lambda v: len(v.sensor_x_m) == _slots(v),
+     "must hold four positions (FL, FR, RL, RR), or one per channel of the sensors block (at least four)"),
+    ("sensor_y_m", lambda v: len(v.sensor_y_m) == len(v.sensor_x_m),
+     "must hold as many positions as sensor_x_m"),
     ("cog_from_front_axle_m", lambda v: 0.0 < v.cog_from_front_axle_m < v.wheelbase_m,
      "must lie between the axles (0 < lf < wheelbase_m)"),
     ("cog_lateral_m", lambda v: abs(v.cog_lateral_m) < 0.5 * min(v.track_front_m, v.track_rear_m),

@@ -113,6 +113,12 @@ class Departures:
         """(front, rear) delay of each sensor's samples behind their stamps [s], both >= 0."""
         return (max(-self.time_offset_s, 0.0), max(self.time_offset_s, 0.0))
 
+    def per_channel(self, values: tuple[float, ...], channels: int) -> tuple[float, ...]:
+        """``values`` (the half car's front and rear, the full car's corners) for ``channels``
+        channel slots: slot ``i`` takes the ``i``-th, slots past the last the last (a sensors
+        block's further channels are the rear's, as their tolerances)."""
+        return tuple(values[min(i, len(values) - 1)] for i in range(channels))
+
     @property
     def corner_delays_s(self) -> tuple[float, ...]:
         """The full car's (FL, FR, RL, RR) delays [s]: each axle's as :attr:`delays_s`."""

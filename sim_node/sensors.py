@@ -57,7 +57,7 @@ class Accelerometers:
             self._sos = butter(LOWPASS_ORDER, departures.lowpass_hz, fs=plant_rate_hz, output="sos")
         self._state: np.ndarray | None = None
         gains = departures.corner_gains if full_car else departures.gains
-        self._gains = None if gains is None else np.asarray(gains)[: len(bias_mps2)]  # a block's k channels
+        self._gains = None if gains is None else np.asarray(departures.per_channel(gains, len(bias_mps2)))
         self._bias = np.asarray(bias_mps2, dtype=float)
         self._gravity: float | np.ndarray = GRAVITY_MPS2 if include_gravity else 0.0
         if include_gravity and gyros is not None and np.any(gyros):  # a gyro reads no gravity

@@ -240,8 +240,8 @@ class Simulation:
         u0 = self._road_at(np.array([self._step]))[0]
         self._build_plants(vehicle, self._initial_state(u0), u0)
         gyros = cfg.gyros
-        bias = tuple(np.where(gyros, cfg.gyro_bias_radps, 0.0 if isinstance(vehicle, FullVehicle) else
-                              cfg.bias_mps2))
+        accel_bias = cfg.departures.per_channel(cfg.bias_mps2, gyros.size)  # the full car's: zero
+        bias = tuple(np.where(gyros, cfg.gyro_bias_radps, accel_bias))
         self.sensors = Accelerometers(cfg.departures, 1.0 / self._dt, bias, cfg.include_gravity,
                                       full_car=isinstance(vehicle, FullVehicle), gyros=gyros)
         self._noise_std = np.where(gyros, cfg.gyro_noise_std_radps, cfg.noise_std_mps2)
@@ -279,9 +279,8 @@ class Simulation:
     def _delays_s(self) -> tuple[float, ...]:
         """Each channel's delay behind its step [s] (the departures')."""
         cfg = self.config
-        if cfg.model == "full":
-            return tuple(cfg.departures.corner_delays_s[: len(cfg.channels)])
-        return tuple(cfg.departures.delays_s)
+        delays = cfg.departures.corner_delays_s if cfg.model == "full" else cfg.departures.delays_s
+        return cfg.departures.per_channel(delays, len(cfg.channels))
 
     def _initial_state(self, u0: np.ndarray) -> np.ndarray:
         """The plant's start: ``initial_state``, the thesis' free decay on a flat road, else at rest."""

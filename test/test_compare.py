@@ -127,13 +127,17 @@ def test_the_sensors_suite_sets_one_imu_against_the_accelerometers_on_both_cars(
     from rozyn_estimator.vehicle_full import FullVehicle
 
     half = suite("sensors", TrialSpec(vehicle=SECOND_VEHICLE))
-    assert [c.spec.vehicle.sensors is not None for c in half] == [False, True, True]
+    assert [c.spec.vehicle.sensors is not None for c in half] == [False, True, True, True, True]
     assert half[1].spec.vehicle.channel_names == ("imu.accel_z", "imu.gyro_y")
     assert half[1].spec.vehicle.tolerances.any is False and half[2].spec.vehicle.tolerances.any
+    assert half[3].spec.vehicle.channel_names == ("front.accel_z", "imu.accel_z", "rear.accel_z",
+                                                  "imu.gyro_y")
+    assert half[4].spec.vehicle.sensor_x_m == (0.0, 1.6, 3.2)  # the second vehicle's wheelbase: 3.2 m
     full = suite("sensors", TrialSpec(vehicle=FullVehicle()))
     kinds = [c.spec.vehicle.channel_kinds for c in full]
     assert kinds[0] == ("accel_z",) * 4 and kinds[1] == ("accel_z", "gyro_x", "gyro_y")
-    assert kinds[3] == ("accel_z", "gyro_x", "gyro_y", "accel_z") and kinds[4] == ("accel_z",) * 3
+    assert kinds[3] == ("accel_z", "gyro_x", "gyro_y", "accel_z", "accel_z")
+    assert kinds[4] == ("accel_z", "gyro_x", "gyro_y", "accel_z") and kinds[5] == ("accel_z",) * 3
     assert full[-1].spec.departures.gyro_yaw_misalignment_rad > 0 and full[-1].bars.coverage[1] == 1.0
     assert all(c.spec.noise_fraction == 0.1 and c.spec.duration_s == 120.0 for c in full)
 

@@ -63,8 +63,6 @@ def test_a_vehicle_file_with_one_imu(tmp_path):
      "does not roll"),
     ({"names": ["i"], "i": {"topic": "/i", "x_m": 1.0, "y_m": 0.2, "channels": ["accel_z", "gyro_y"]}},
      "off the centreline"),
-    ({"names": ["i", "r"], "i": {"topic": "/i", "x_m": 1.0, "channels": ["accel_z", "gyro_y"]},
-      "r": {"topic": "/r", "x_m": 2.8}}, "fits two channels"),
     ({"names": ["f", "r"], "f": {"topic": "/f", "x_m": 1.0}, "r": {"topic": "/r", "x_m": 1.3}},
      "a quarter wheelbase"),
     ({"names": ["i"], "i": {"topic": "/i", "x_m": 1.0, "channels": ["accel_x"]}}, "channels"),

@@ -1,5 +1,5 @@
 """Both vehicle files describe themselves to the one vehicle model through the same members:
-``corners``, ``ROLLS``, ``body_values``, ``AXLE_SLOTS``, ``CORNER_FIELDS`` and ``SENSOR_FIELDS``."""
+``corners``, ``ROLLS``, ``body_values``, ``FRONT_SLOTS``, ``CORNER_FIELDS`` and ``SENSOR_FIELDS``."""
 
 from __future__ import annotations
 

@@ -25,9 +25,12 @@ from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
 
 
 def _converted(v: AnyVehicle) -> bool:
-    """The stage reads the block through the corners: it holds a gyro, or (the full car) any
-    block (the stage's plane reads accelerometers at the corners' places)."""
-    return v.sensors is not None and (v.ROLLS or any(kind != "accel_z" for kind in v.channel_kinds))
+    """The stage reads the block through the corners: it holds a gyro, or other than one channel
+    per corner, or (the full car) any block (the stage's plane reads accelerometers at the corners'
+    places)."""
+    kinds = v.channel_kinds
+    return v.sensors is not None and (v.ROLLS or len(kinds) != v.CORNER_COUNT or
+                                      any(kind != "accel_z" for kind in kinds))
 
 
 def stage_vehicle(vehicle: AnyVehicle) -> AnyVehicle:

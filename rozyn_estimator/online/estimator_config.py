@@ -147,6 +147,7 @@ class EstimatorConfig:
         if self.full_vehicle is None:
             del data["full_vehicle"]  # the half car's record as before the full car
         del data["vehicle"]["sensors"]  # as a vehicle file holds it, where given (as before, where not)
+        del data["vehicle"]["channel_x_m"]  # the block's, placed again on reading
         if self.vehicle.sensors is not None:
             data["vehicle"]["sensors"] = self.vehicle.sensors.to_dict()
         if self.full_vehicle is not None:

@@ -198,9 +198,10 @@ def _drive_cycles(noisy: TrialSpec, vehicle: Any) -> list[Case]:
 def _sensor_sets(noisy: TrialSpec, vehicle: Any) -> list[Case]:
     """The accelerometers (the half car's two at the axles, the full car's four at the corners)
     and one IMU (``rozyn trial --sensors imu``'s) on the same roads, the vehicle known exactly,
-    10 % noise of each channel's rms; the IMU with the vehicle's own tolerances; the full car's
-    mixed sets (an IMU and an accelerometer at the rear axle's centre; three corner
-    accelerometers) and an IMU turned 2° about z, with its own tolerances."""
+    10 % noise of each channel's rms; the IMU with the vehicle's own tolerances; mixed sets (an
+    IMU and two accelerometers at the axles' centres; the half car's three accelerometers along
+    it; the full car's IMU and rear accelerometer, three corner accelerometers) and the full car's
+    IMU turned 2° about z, with its own tolerances."""
     bars = Bars(bias_pct=0.5)
     exact = noisy.vehicle
     imu = with_sensor_preset(exact, "imu")
@@ -208,17 +209,23 @@ def _sensor_sets(noisy: TrialSpec, vehicle: Any) -> list[Case]:
     cases = [Case("the accelerometers", noisy.replace(vehicle=exact.with_sensors(None)), bars),
              Case("one IMU", noisy.replace(vehicle=imu), bars),
              Case("one IMU, the vehicle's own tolerances", noisy.replace(vehicle=toleranced), COVERS)]
-    if isinstance(exact, Vehicle):
-        return cases
     own = imu.sensors.sensors[0]
+    axles = (Sensor("front", "/accel/front", 0.0, 0.0), Sensor("rear", "/accel/rear", exact.wheelbase_m, 0.0))
+    mixed = [Case("one IMU and two accelerometers at the axles' centres",
+                  noisy.replace(vehicle=exact.with_sensors(SensorSet((own, *axles)))), bars)]
+    if isinstance(exact, Vehicle):
+        mid = Sensor("mid", "/accel/mid", exact.wheelbase_m / 2, 0.0)
+        three = SensorSet((axles[0], mid, axles[1]))
+        return [*cases, *mixed, Case("three accelerometers (the axles and mid-wheelbase)",
+                                     noisy.replace(vehicle=exact.with_sensors(three)), bars)]
     x, y = exact.corner_x_m, exact.corner_y_m
-    mixed = SensorSet((own, Sensor("rear", "/accel/rear", exact.wheelbase_m, 0.0)))
+    rear = SensorSet((own, axles[1]))
     three = SensorSet(tuple(Sensor(c, f"/accel/{c}", x[i], y[i]) for i, c in enumerate(CORNERS[:3])))
     turn = Departures(gyro_yaw_misalignment_rad=math.radians(2.0))
     turned = noisy.replace(vehicle=toleranced, departures=turn)
-    return [*cases,
+    return [*cases, *mixed,
             Case("one IMU and an accelerometer at the rear axle",
-                 noisy.replace(vehicle=exact.with_sensors(mixed)), bars),
+                 noisy.replace(vehicle=exact.with_sensors(rear)), bars),
             Case("three corner accelerometers (FL, FR, RL)", noisy.replace(vehicle=exact.with_sensors(three)),
                  bars),
             Case("one IMU turned 2 deg about z, its own tolerances", turned, COVERS)]

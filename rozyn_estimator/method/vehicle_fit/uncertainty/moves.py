@@ -25,14 +25,17 @@ _QUADS = {"suspension_stiffness": "suspension_stiffness_npm", "suspension_dampin
           "tyre_stiffness": "tyre_stiffness_npm", "tyre_damping": "tyre_damping_nspm",
           "unsprung_mass": "unsprung_mass_kg"}
 
+_AXLE_CORNERS = {"front": (0, 1), "rear": (2, 3)}  # the full car's corners on each axle
 VehicleMove = Callable[[float], AnyVehicle]
 V = TypeVar("V", bound=AnyVehicle)
 
 
 def axle_channels(v: AnyVehicle, axle: str) -> tuple[int, ...]:
-    """The vehicle's channel slots on ``axle`` (``front``, ``rear``): the full car's two corners',
-    the half car's one."""
-    return tuple(v.AXLE_SLOTS[axle])
+    """The vehicle's channel slots whose sensors take ``axle``'s tolerances (``front``, ``rear``):
+    the full car's first two, the half car's first; the rest are the rear's."""
+    if axle == "front":
+        return v.FRONT_SLOTS
+    return tuple(c for c in range(len(v.sensor_x_m)) if c not in v.FRONT_SLOTS)
 
 
 def axle_of(v: AnyVehicle, channel: int) -> str:
@@ -95,7 +98,7 @@ def _axle_moves(v: V, key: str,
     axle = "front" if "_front" in key else "rear"
     quad = next((q for k, q in _QUADS.items() if key.startswith(k)), None)
     if quad is not None:
-        return [(key, REL_STEP, lambda h: scaled(quad, v.AXLE_SLOTS[axle], h))]
+        return [(key, REL_STEP, lambda h: scaled(quad, _AXLE_CORNERS[axle], h))]
     if key == "sensor_lateral_m":
         return [(f"{key}[{v.channel_names[c]}]", ABS_STEP, lateral(c)) for c in sensors
                 if v.channel_kinds[c] == "accel_z"]  # a gyro reads the same rotation anywhere
