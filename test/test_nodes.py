@@ -344,7 +344,8 @@ def test_parameter_files_configure_both_nodes():
 
 def test_a_parameter_file_with_a_sensors_block_configures_both_nodes(tmp_path):
     """config/vehicle_imu.yaml as a parameter file: its nested sensors block arrives as flat
-    ``vehicle.sensors.*`` parameters, and both nodes read one IMU; so they do a full car's
+    ``vehicle.sensors.*`` parameters, and both nodes read one IMU (an IMU and two accelerometers:
+    config/vehicle_imu_axles.yaml); so they do a full car's
     (config/vehicle_full_imu.yaml); a set that cannot see the body is refused."""
     ctx = Context()
     files = ["--params-file", str(ROOT / "config" / "vehicle_imu.yaml")]
@@ -356,6 +357,20 @@ def test_a_parameter_file_with_a_sensors_block_configures_both_nodes(tmp_path):
         assert est.config.fields == ("linear_acceleration.z", "angular_velocity.y")
         assert sim.config.channels == ("imu.accel_z", "imu.gyro_y")
         assert est.online.vehicle == sim.config.vehicle and est.online.vehicle.sensor_x_m == (1.5, 1.5)
+        est.destroy_node()
+        sim.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
+    ctx = Context()
+    files = ["--params-file", str(ROOT / "config" / "vehicle_imu_axles.yaml")]  # three sensors, four channels
+    rclpy.init(args=["--ros-args", *files], context=ctx, domain_id=DOMAIN + 4)
+    try:
+        est, sim = EstimatorNode(context=ctx), SimNode(context=ctx)
+        assert est.config.sensors == (("front.accel_z", "/accel/front"), ("imu.accel_z", "/imu/data"),
+                                      ("rear.accel_z", "/accel/rear"), ("imu.gyro_y", "/imu/data"))
+        assert sim.config.channels == tuple(label for label, _ in est.config.sensors)
+        assert est.online.vehicle == sim.config.vehicle
+        assert est.online.vehicle.sensor_x_m == (0.0, 1.5, 2.8, 1.5)
         est.destroy_node()
         sim.destroy_node()
     finally:
