@@ -342,6 +342,8 @@ def _vehicle_section(data: Any, source: str) -> Any:
                 return params["vehicle"]
         if isinstance(data.get("vehicle"), Mapping):
             return data["vehicle"]
+        if set(data) == {"vehicle"} and data["vehicle"] is None:  # "vehicle:" with nothing under it
+            return {}
     return data
 
 

@@ -37,6 +37,12 @@ def test_ros_params_yaml(tmp_path):
     assert v.sprung_mass_kg == 1000.0
 
 
+def test_a_vehicle_key_with_nothing_under_it_is_the_defaults(tmp_path):
+    path = tmp_path / "v.yaml"
+    path.write_text("vehicle:\n  # every value its default\n")
+    assert load_vehicle(path) == Vehicle()
+
+
 def test_repo_config_loads():
     from pathlib import Path
 
