@@ -84,6 +84,10 @@ class SimNodeOptions:
                                        "topic needs first (2: the estimator and a recorder, so the bag "
                                        "holds every sample the estimator saw)", low=1, high=100,
                                        read_only=True)
+    subscriber_grace_s: float = param(1.0, "with wait_for_subscribers: the wall time held after the last "
+                                      "subscriber appears (a publisher sees a subscriber before the "
+                                      "subscriber has matched it, and best-effort samples sent in between "
+                                      "are lost)", unit="s", low=0.0, high=60.0, read_only=True)
 
     def __post_init__(self) -> None:
         check(self)
@@ -135,6 +139,7 @@ class SimNode(Node):
         self._wall_start = time.monotonic()
         self.finished = False
         self.published = 0  # samples per sensor
+        self._subscribed_at: float | None = None  # wall time every accel topic had its subscribers
         self.gate: Callable[[], bool] | None = None  # produce the next block only when it says yes
 
         sensor_qos = QoSProfile(depth=o.qos_depth, reliability=ReliabilityPolicy.BEST_EFFORT)
@@ -239,7 +244,12 @@ class SimNode(Node):
         missing = [pub.topic_name for pub in self._pub if pub.get_subscription_count() < wanted]
         if missing:
             self.get_logger().info(f"waiting for {wanted} subscriber(s) on {', '.join(missing)}", once=True)
+            self._subscribed_at = None
             return True
+        if self._subscribed_at is None:
+            self._subscribed_at = time.monotonic()
+        if time.monotonic() - self._subscribed_at < self.options.subscriber_grace_s:
+            return True  # the subscribers' side of discovery may lag the publishers'
         if not self._sim_mode:
             self._epoch_ns = self.get_clock().now().nanoseconds
         return False

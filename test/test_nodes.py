@@ -126,10 +126,11 @@ def test_one_imu_through_both_nodes(ros, tmp_path):
 
 def test_the_sim_waits_for_as_many_subscribers_as_asked(ros):
     """With a recorder beside the estimator (``subscribers_per_topic`` 2) the sim holds its
-    start until every accelerometer topic has both: one subscriber is not enough."""
+    start until every accelerometer topic has both: one subscriber is not enough; then for
+    ``subscriber_grace_s`` more, while the subscribers' side of discovery catches up."""
     sim = ros.add(SimNode(context=ros.context, parameter_overrides=[
         Parameter("time_mode", value="sim"), Parameter("wait_for_subscribers", value=True),
-        Parameter("subscribers_per_topic", value=2)]))
+        Parameter("subscribers_per_topic", value=2), Parameter("subscriber_grace_s", value=2.0)]))
     topics, qos = ("accel/front", "accel/rear"), qos_profile_sensor_data  # the sim's best effort
     for topic in topics:
         ros.probe.create_subscription(Imu, topic, lambda _: None, qos)
@@ -141,6 +142,9 @@ def test_the_sim_waits_for_as_many_subscribers_as_asked(ros):
     ros.spin_until(lambda: sim.published > 0, 1.0)
     assert sim.published == 0  # the rear has one subscriber still
     ros.probe.create_subscription(Imu, topics[1], lambda _: None, qos)
+    assert ros.spin_until(lambda: all(p.get_subscription_count() == 2 for p in sim._pub), 10.0)
+    ros.spin_until(lambda: sim.published > 0, 0.5)
+    assert sim.published == 0  # within the grace
     assert ros.spin_until(lambda: got, 10.0)
 
 
