@@ -173,6 +173,7 @@ def sensors_from_parameters(values: Mapping[str, Any]) -> SensorSet | None:
     return sensors_from_mapping(block, "vehicle parameters")
 
 
+@functools.lru_cache(maxsize=64)  # the model reads a vehicle's channels at every move of its budget
 def half_car_channels(sensors: SensorSet, wheelbase_m: float) -> tuple[Channel, ...]:
     """The channels the half car fits: the block's accelerometers front to rear, then its pitch
     gyros; ConfigError (one line naming what is missing) for a set that cannot identify the

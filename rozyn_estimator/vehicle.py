@@ -91,8 +91,9 @@ class Vehicle:
                                          "0: not given)", unit="m", low=0.0)
     tolerances: Tolerances = param(description="standard uncertainties of the assumed values",
                                    default_factory=Tolerances)
-    # the sensors block (rozyn_estimator.sensors; None: the two accelerometers at the offsets above).
-    # Its positions are the offsets' (with_sensors): the budget perturbs those, the block names channels.
+    # the sensors block (rozyn_estimator.sensors; None: the two accelerometers at the offsets above);
+    # with_sensors places its channels at channel_x_m (the budget perturbs those) and its first two
+    # also at the offsets (as a written file holds them)
     sensors: SensorSet | None = dataclasses.field(default=None)
     # a sensors block's channels' positions behind the front axle [m], in channels' order (with_sensors
     # places them; the budget moves them); empty without a block
