@@ -113,12 +113,6 @@ class Departures:
         """(front, rear) delay of each sensor's samples behind their stamps [s], both >= 0."""
         return (max(-self.time_offset_s, 0.0), max(self.time_offset_s, 0.0))
 
-    def per_channel(self, values: tuple[float, ...], channels: int) -> tuple[float, ...]:
-        """``values`` (the half car's front and rear, the full car's corners) for ``channels``
-        channel slots: slot ``i`` takes the ``i``-th, slots past the last the last (a sensors
-        block's further channels are the rear's, as their tolerances)."""
-        return tuple(values[min(i, len(values) - 1)] for i in range(channels))
-
     @property
     def corner_delays_s(self) -> tuple[float, ...]:
         """The full car's (FL, FR, RL, RR) delays [s]: each axle's as :attr:`delays_s`."""
@@ -135,6 +129,13 @@ class Departures:
                              damping_nspm=tuple(c.suspension_damping_nspm.tolist()),
                              damper_ratio=self.damper_ratio, progression=self.spring_progression,
                              reference_m=self.spring_reference_m)
+
+
+def per_channel(values: tuple[float, ...], channels: int) -> tuple[float, ...]:
+    """``values`` (the half car's front and rear, the full car's corners) for ``channels`` channel
+    slots: slot ``i`` takes the ``i``-th, slots past the last the last (a sensors block's further
+    channels are the rear's, as their tolerances)."""
+    return tuple(values[min(i, len(values) - 1)] for i in range(channels))
 
 
 @dataclass(frozen=True)
@@ -172,4 +173,4 @@ class SuspensionLaw:
         return linear + self.extra_tension_n(extension_m, velocity_mps)
 
 
-__all__ = ["Departures", "SuspensionLaw"]
+__all__ = ["Departures", "SuspensionLaw", "per_channel"]

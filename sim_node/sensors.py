@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import butter, sosfilt, sosfilt_zi
 
-from sim_node.departures import Departures
+from sim_node.departures import Departures, per_channel
 
 GRAVITY_MPS2 = 9.80665
 LOWPASS_ORDER = 2
@@ -57,7 +57,7 @@ class Accelerometers:
             self._sos = butter(LOWPASS_ORDER, departures.lowpass_hz, fs=plant_rate_hz, output="sos")
         self._state: np.ndarray | None = None
         gains = departures.corner_gains if full_car else departures.gains
-        self._gains = None if gains is None else np.asarray(departures.per_channel(gains, len(bias_mps2)))
+        self._gains = None if gains is None else np.asarray(per_channel(gains, len(bias_mps2)))
         self._bias = np.asarray(bias_mps2, dtype=float)
         self._gravity: float | np.ndarray = GRAVITY_MPS2 if include_gravity else 0.0
         if include_gravity and gyros is not None and np.any(gyros):  # a gyro reads no gravity

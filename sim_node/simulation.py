@@ -36,7 +36,7 @@ from rozyn_estimator.errors import ConfigError
 from rozyn_estimator.parameters import check, param
 from rozyn_estimator.vehicle import Vehicle
 from rozyn_estimator.vehicle_full import MODELS, FullVehicle
-from sim_node.departures import Departures
+from sim_node.departures import Departures, per_channel
 from sim_node.drive_cycle import DriveCycle, load_drive_cycle
 from sim_node.load_change import STANDING_MPS, with_point_load
 from sim_node.load_transfer import LoadTransfer
@@ -240,7 +240,7 @@ class Simulation:
         u0 = self._road_at(np.array([self._step]))[0]
         self._build_plants(vehicle, self._initial_state(u0), u0)
         gyros = cfg.gyros
-        accel_bias = cfg.departures.per_channel(cfg.bias_mps2, gyros.size)  # the full car's: zero
+        accel_bias = per_channel(cfg.bias_mps2, gyros.size)  # the full car's: zero
         bias = tuple(np.where(gyros, cfg.gyro_bias_radps, accel_bias))
         self.sensors = Accelerometers(cfg.departures, 1.0 / self._dt, bias, cfg.include_gravity,
                                       full_car=isinstance(vehicle, FullVehicle), gyros=gyros)
@@ -280,7 +280,7 @@ class Simulation:
         """Each channel's delay behind its step [s] (the departures')."""
         cfg = self.config
         delays = cfg.departures.corner_delays_s if cfg.model == "full" else cfg.departures.delays_s
-        return cfg.departures.per_channel(delays, len(cfg.channels))
+        return per_channel(delays, len(cfg.channels))
 
     def _initial_state(self, u0: np.ndarray) -> np.ndarray:
         """The plant's start: ``initial_state``, the thesis' free decay on a flat road, else at rest."""
