@@ -42,27 +42,37 @@ def test_the_ratio_does_not_hold_on_another_window_length_or_context():
     assert not ratio.holds(ratio.theta[:-1], 12_000, ("vehicle", "settings"))
 
 
-def _windows() -> tuple[np.ndarray, np.ndarray]:
+def _windows(count: int = 1) -> list[np.ndarray]:
+    """A 120 s window and the ``count`` next ones, 5 s apart."""
     live = Simulation(SimConfig(road=RoadSpec(amplitudes="gaussian"), seed=4, noise_std_mps2=0.05))
-    first = live.run(120.0).accel_mps2
-    return first, np.vstack([first[500:], live.run(5.0).accel_mps2])
+    windows = [live.run(120.0).accel_mps2]
+    for _ in range(count):
+        windows.append(np.vstack([windows[-1][500:], live.run(5.0).accel_mps2]))
+    return windows
 
 
-def test_the_half_cars_warm_update_keeps_the_ratio_and_its_covariance():
-    """The next window (5 s later) keeps the cold update's ratio, and its published std is
-    within 3 % of the one with the ratio summed afresh (the time blocks' factors alike)."""
-    first, second = _windows()
-    cold = estimate(first, 100.0, Vehicle(), PipelineConfig(), SPEED_MPS)
-    assert cold.refinement is not None and cold.refinement.sandwich is not None
-    warm = estimate(second, 100.0, Vehicle(), PipelineConfig(), SPEED_MPS, warm_start=cold)
-    fresh_start = dataclasses.replace(cold, refinement=dataclasses.replace(cold.refinement, sandwich=None))
-    fresh = estimate(second, 100.0, Vehicle(), PipelineConfig(), SPEED_MPS, warm_start=fresh_start)
-    assert warm.refinement is not None and fresh.refinement is not None
-    assert warm.refinement.sandwich is cold.refinement.sandwich
-    assert fresh.refinement.sandwich is not cold.refinement.sandwich
-    np.testing.assert_allclose(warm.params, fresh.params, rtol=1e-9)
-    std, fresh_std = np.sqrt(np.diag(warm.covariance)), np.sqrt(np.diag(fresh.covariance))
-    np.testing.assert_allclose(std, fresh_std, rtol=0.03)
+def test_the_half_cars_warm_updates_keep_the_ratio_and_their_covariance():
+    """Half or more of the next windows (5 s apart) keep the ratio taken before (a noise
+    floor's estimate moves by about 0.1 in its log from one window to the next: not every one;
+    18-19 of 24 on three roads), and each published std is within 3 % of the one with the ratio
+    summed afresh."""
+    first, *nexts = _windows(4)
+    previous = estimate(first, 100.0, Vehicle(), PipelineConfig(), SPEED_MPS)
+    kept = 0
+    for window in nexts:
+        assert previous.refinement is not None and previous.refinement.sandwich is not None
+        warm = estimate(window, 100.0, Vehicle(), PipelineConfig(), SPEED_MPS, warm_start=previous)
+        fresh_start = dataclasses.replace(previous,
+                                          refinement=dataclasses.replace(previous.refinement, sandwich=None))
+        fresh = estimate(window, 100.0, Vehicle(), PipelineConfig(), SPEED_MPS, warm_start=fresh_start)
+        assert warm.refinement is not None and fresh.refinement is not None
+        assert fresh.refinement.sandwich is not previous.refinement.sandwich
+        kept += warm.refinement.sandwich is previous.refinement.sandwich
+        np.testing.assert_allclose(warm.params, fresh.params, rtol=1e-9)
+        std, fresh_std = np.sqrt(np.diag(warm.covariance)), np.sqrt(np.diag(fresh.covariance))
+        np.testing.assert_allclose(std, fresh_std, rtol=0.03)
+        previous = warm
+    assert kept >= len(nexts) // 2
 
 
 def test_the_half_cars_ratio_is_recomputed_for_another_vehicle():

@@ -12,6 +12,11 @@ from typing import Protocol
 import numpy as np
 
 NOISE_AT_ZERO = 1e-5  # a noise floor below this share of its channel's band power: noise-free, held
+# S nearly singular: its smallest eigenvalue below this share of its largest at some frequency.
+# Measured at the fit's optimum: noise-free at a constant speed (floors at zero) 1.3e-5, MEMS noise
+# at a constant speed 7e-5 (the grid serves it), urban windows with both floors at zero 2e-3 to
+# 7e-3 (the road's delays mixed: the grid's estimates within 0.0005 std of every bin's)
+NEARLY_SINGULAR = 1e-4
 _HALVINGS = 4  # backtracking of a step when it does not lower ℓ
 
 # a floor's share of its channel's power where the slope at zero is read: an urban window's
@@ -72,6 +77,15 @@ def backtracked(
             return point + step
         step = 0.5 * step
     return point
+
+
+def nearly_singular(S: np.ndarray) -> bool:
+    """S (K, k, k) has a frequency where it is nearly singular (:data:`NEARLY_SINGULAR`): where
+    floors at zero (:func:`singular_floors`) leave it so, the grid's small interpolation errors
+    matter. A varying drive's road reaches the axles at a mixture of delays, which decorrelates
+    them: its floors at zero leave S well conditioned."""
+    eigenvalues = np.linalg.eigvalsh(S)
+    return bool(np.min(eigenvalues[:, 0] / eigenvalues[:, -1]) < NEARLY_SINGULAR)
 
 
 def singular_floors(shares: np.ndarray, two_tracks: bool) -> bool:

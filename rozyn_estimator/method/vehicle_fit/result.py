@@ -23,6 +23,7 @@ class Refinement(LikelihoodResult):
     calibration: VehicleCalibration | None = None  # the sensors and corners as the data calibrated them
     sandwich: SandwichRatio | None = None  # the taper's sandwich over the model's std, where taken
     model_fit: ModelFit | None = None  # the goodness-of-fit check
+    every_bin: bool = False  # S at every Fourier bin (nearly singular): the next window starts so
 
     def to_dict(self) -> dict[str, object]:
         return {"status": self.status, "reason": self.reason,

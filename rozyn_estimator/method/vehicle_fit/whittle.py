@@ -19,6 +19,9 @@ from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum, herm
 
 _HESSIAN_STEP = 3  # the optimiser's Fisher information: every 3rd frequency (class docstring)
 _HESSIAN_MIN = 300  # ... of models with at least this many frequencies
+# a fit for the body parameters converges once their step is below the tolerance and the
+# whole decrement below this: ℓ within 0.05 nats, the nuisances' quadratic model trusted
+_NUISANCE_DECREMENT = 0.1
 
 
 class WhittleObjective:
@@ -277,19 +280,42 @@ class WhittleObjective:
         return float(grad @ np.linalg.solve(self.hess(theta), grad))
 
 
-def scoring(objective: WhittleObjective, theta0: np.ndarray, tol: float, max_iter: int) -> OptimizeResult:
-    """Scoring by scipy's trust-region method (the Fisher information as the Hessian) until the
-    Newton decrement is below ``tol``; ``fun`` inf when θ0 gives no finite ℓ."""
+def scoring(objective: WhittleObjective, theta0: np.ndarray, tol: float, max_iter: int,
+            body: int = 0) -> OptimizeResult:
+    """Scoring by scipy's trust-region method (the Fisher information as the Hessian) until
+    :func:`converged`; ``fun`` inf when θ0 gives no finite ℓ."""
     def stop_when_converged(intermediate_result: OptimizeResult) -> None:
-        if objective.decrement(intermediate_result.x) < tol:
+        if converged(objective, intermediate_result.x, tol, body):
             raise StopIteration
 
     if not np.isfinite(objective.fun(theta0)):
         return OptimizeResult(x=theta0, fun=math.inf, nit=0)
-    if objective.decrement(theta0) < tol:
+    if converged(objective, theta0, tol, body):
         return OptimizeResult(x=theta0, fun=objective.fun(theta0), nit=0)
     return minimize(objective.fun, theta0, jac=objective.jac, hess=objective.hess, method="trust-exact",
                     callback=stop_when_converged, options={"gtol": 1e-12, "maxiter": max_iter})
+
+
+def converged(objective: WhittleObjective, theta: np.ndarray, tol: float, body: int = 0) -> bool:
+    """The Newton decrement ``gᵀH⁻¹g`` below ``tol`` (ℓ within half of it of the optimum), or,
+    given the ``body`` leading parameters the fit is for, their part of it below ``tol`` while
+    the whole is below :data:`_NUISANCE_DECREMENT`.
+
+    Their part is ``δ_bᵀ ((H⁻¹)_bb)⁻¹ δ_b`` with the Newton step ``δ = H⁻¹g``: the decrement of
+    the likelihood profiled over the nuisances, i.e. the body's remaining step in its own std,
+    squared. A noise floor on its way to zero moves the whole decrement without end (its log's
+    step stays the trust radius while ℓ gains ever less) but not the body: on urban windows a
+    third of the iterations were spent so (131 against 88 on 42 warm updates of ``udds``)."""
+    grad = objective.jac(theta)
+    hessian = objective.hess(theta)
+    step = np.linalg.solve(hessian, grad)
+    whole = float(grad @ step)
+    if whole < tol:
+        return True
+    if not body or whole >= _NUISANCE_DECREMENT:
+        return False
+    part = step[:body]
+    return float(part @ np.linalg.solve(np.linalg.inv(hessian)[:body, :body], part)) < tol
 
 
 def ridged(m: np.ndarray) -> np.ndarray:
