@@ -36,8 +36,9 @@ class LikelihoodConfig:
     grid_hz: float = param(0.05, "the model is evaluated this far apart and interpolated between (0: at "
                            "every Fourier bin)", unit="Hz", low=0.0, high=0.1)
     max_iter: int = param(100, "optimiser iterations per start", low=1)
-    tol: float = param(1e-3, "convergence: Newton decrement below this (ℓ within half of it of the optimum)",
-                       low=0.0, open_low=True)
+    tol: float = param(1e-3, "convergence: Newton decrement below this (ℓ within half of it of the optimum), "
+                       "or the body parameters' part of it (their remaining step in their std, squared) "
+                       "with ℓ within 0.05 nats", low=0.0, open_low=True)
     tol_calibrated: float = param(0.05, "convergence when the calibration's Newton step follows (it "
                                   "completes the fit's: measured, the estimates move by < 0.003 std; "
                                   "a cold fit hands over earlier, within the calibration's one-step "
