@@ -72,9 +72,13 @@ class WhittleObjective:
         factor = _inverse_cholesky(S)
         return math.inf if factor is None else self._nll(factor)
 
-    def _nll(self, linv: np.ndarray) -> float:
+    def _nll(self, linv: np.ndarray, inv: np.ndarray | None = None) -> float:
+        """ℓ from ``L⁻¹`` (and ``S⁻¹ = L⁻ᴴ L⁻¹`` where at hand): ``tr(S⁻¹ I)`` as one sum over
+        both indices (numpy's matmul loops over a stack of tiny matrices: the products
+        ``L⁻¹ I L⁻ᴴ`` took 0.9 ms for 1741 2x2s, the sum 0.03 ms)."""
         log_det = -2.0 * np.log(np.einsum("kaa->ka", linv).real).sum(axis=1)
-        fit = np.einsum("kaa->k", linv @ self.periodogram @ herm(linv)).real
+        inv = mul(herm(linv), linv) if inv is None else inv
+        fit = np.einsum("kab,kba->k", inv, self.periodogram).real
         return float(self.counts @ (log_det + fit))
 
     def evaluate(self, theta: np.ndarray) -> tuple[float, np.ndarray]:
@@ -108,11 +112,11 @@ class WhittleObjective:
         if linv is None:
             self._state, self._value = None, (math.inf, np.zeros(self.model.n_params))
             return self._value
-        inv = herm(linv) @ linv
-        W = self.model.to_nodes(self.counts[:, None, None] * (inv - inv @ self.periodogram @ inv))
+        inv = mul(herm(linv), linv)
+        W = self.model.to_nodes(self.counts[:, None, None] * (inv - mul(mul(inv, self.periodogram), inv)))
         grad = (dS.reshape(dS.shape[0], -1) @ W.swapaxes(1, 2).ravel()).real  # Σ_k tr(W ∂S)
-        penalty = 0.5 * float(self.precision @ theta**2)
-        self._state, self._value = (S, dS, linv), (self._nll(linv) + penalty, grad + self.precision * theta)
+        value = self._nll(linv, inv) + 0.5 * float(self.precision @ theta**2)
+        self._state, self._value = (S, dS, linv), (value, grad + self.precision * theta)
         return self._value
 
     def whitened_periodogram(self, theta: np.ndarray) -> np.ndarray | None:
@@ -183,8 +187,8 @@ class WhittleObjective:
         multiplies one (k, p k) matrix per frequency, not p tiny ones (twice as fast)."""
         p, K, k, _ = dS.shape
         roots = self._root_counts if root_counts is None else root_counts
-        left = linv @ dS.transpose(1, 2, 0, 3).reshape(K, k, p * k)  # (K, a, (p, b)): L⁻¹ ∂S
-        both = left.reshape(K, k * p, k) @ (herm(linv) * roots)  # (K, (a, p), d)
+        left = mul(linv, dS.transpose(1, 2, 0, 3).reshape(K, k, p * k))  # (K, a, (p, b)): L⁻¹ ∂S
+        both = mul(left.reshape(K, k * p, k), herm(linv) * roots)  # (K, (a, p), d)
         W = both.reshape(K, k, p, k).transpose(2, 0, 1, 3).reshape(p, -1)
         return np.concatenate([W.real, W.imag], axis=1)
 
@@ -211,10 +215,10 @@ class WhittleObjective:
         if self._kernels is None or self._kernels[0] != key:
             _, linv = self.factored(theta)
             assert self._state is not None
-            inv = herm(linv) @ linv
+            inv = mul(herm(linv), linv)
             # the map to the frequencies is linear: the q directions mapped, not every parameter
             dS = self.model.to_targets(np.tensordot(combos, self._state[1], axes=1))
-            self._kernels = (key, inv @ dS @ inv)
+            self._kernels = (key, mul(mul(inv, dS), inv))
         return self._kernels[1]
 
     def information(self, theta: np.ndarray) -> np.ndarray:
@@ -316,6 +320,19 @@ def converged(objective: WhittleObjective, theta: np.ndarray, tol: float, body: 
         return False
     part = step[:body]
     return float(part @ np.linalg.solve(np.linalg.inv(hessian)[:body, :body], part)) < tol
+
+
+def mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a @ b`` for stacks of small matrices (..., k, m) @ (..., m, n). Up to three inner
+    columns, as a sum of outer products each vectorised over the stack: numpy's matmul loops
+    over a stack of tiny matrices (1741 2x2 products: 0.45 ms against 0.16; 3x3: 0.49 against
+    0.21; from 4x4 matmul is as quick or quicker)."""
+    if a.shape[-1] > 3:
+        return a @ b
+    out = a[..., :, 0, None] * b[..., None, 0, :]
+    for j in range(1, a.shape[-1]):
+        out = out + a[..., :, j, None] * b[..., None, j, :]
+    return out
 
 
 def ridged(m: np.ndarray) -> np.ndarray:
