@@ -12,6 +12,7 @@ import pytest
 from rozyn_estimator.method import PipelineConfig, estimate
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig
 from rozyn_estimator.method.likelihood.guards import NEARLY_SINGULAR, nearly_singular
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
 from rozyn_estimator.method.vehicle_fit.whittle import converged
 from rozyn_estimator.tolerances import Tolerances
 from rozyn_estimator.vehicle import Vehicle
@@ -83,17 +84,35 @@ def _urban_window(start_s: float) -> tuple[np.ndarray, np.ndarray]:
     return block.accel_mps2, block.speed_mps
 
 
-def test_an_urban_window_with_its_floors_at_zero_keeps_the_grid():
+def test_an_urban_window_with_its_floors_at_zero_keeps_the_grid(monkeypatch):
     """An urban window (``udds`` from 270 s) fits both noise floors to zero: the road's mixed
     delays keep S regular, so the fit stays on the grid (before, it went on at every bin, at 3-4
     times the cost), and its estimate is the every-bin fit's within 0.01 std."""
     y, v = _urban_window(270.0)
+    regrids = []
+    regrid = VehicleSpectrum.regrid
+    monkeypatch.setattr(VehicleSpectrum, "regrid", lambda self, *a: regrids.append(a[-1]) or regrid(self, *a))
     est = estimate(y, 100.0, EXACT, PipelineConfig(), v)
+    assert 0.0 not in regrids  # (the cold start's coarse model is a regrid too)
     every = PipelineConfig(likelihood=dataclasses.replace(LikelihoodConfig(), grid_hz=0.0))
     exact = estimate(y, 100.0, EXACT, every, v)
     assert est.ok and exact.ok, (est.reason, exact.reason)
     assert max(est.refinement.noise_std_mps2) < 1e-3  # m/s²: MEMS noise is 0.025, fitted as none
-    assert not est.refinement.every_bin and exact.refinement.every_bin
+    assert not est.refinement.every_bin and not exact.refinement.every_bin  # S regular: nor the next
     std = np.sqrt(np.diag(exact.covariance))
     assert np.all(np.abs(est.params - exact.params) < 0.01 * std), (est.params - exact.params) / std
     np.testing.assert_allclose(np.sqrt(np.diag(est.covariance)), std, rtol=0.01)
+
+
+def test_a_window_after_noise_free_data_goes_back_to_the_grid():
+    """A window started at every bin (its predecessor's S was nearly singular) whose own S is
+    regular (10 % sensor noise) tells its successor to start on the grid again."""
+    live = Simulation(SimConfig(road=RoadSpec(amplitudes="gaussian"), seed=4, noise_std_mps2=0.05,
+                                vehicle=EXACT))
+    first = live.run(120.0).accel_mps2
+    second = np.vstack([first[500:], live.run(5.0).accel_mps2])
+    cold = estimate(first, 100.0, EXACT, PipelineConfig(), 100 / 3.6)
+    assert cold.ok and not cold.refinement.every_bin
+    singular = dataclasses.replace(cold, refinement=dataclasses.replace(cold.refinement, every_bin=True))
+    warm = estimate(second, 100.0, EXACT, PipelineConfig(), 100 / 3.6, warm_start=singular)
+    assert warm.ok and not warm.refinement.every_bin

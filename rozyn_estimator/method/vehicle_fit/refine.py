@@ -197,8 +197,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
         revived = aground(objective, best.x, best.fun, model.noise_slice, power)
         if revived is not None:
             run(revived, max(1, cfg.max_iter - iterations))
-    if best is not None and model.grid_hz > 0 and _singular(objective, best.x, power):
-        # the interpolation's small errors matter
+    if best is not None and model.grid_hz > 0 and _singular(objective, best.x, power):  # grid errors matter
         found, best = best.x, None
         model = model.regrid(freq, kernel, 0.0)
         objective = WhittleObjective(model, periodogram, counts)
@@ -285,7 +284,8 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
         coherence_scale=float(np.exp(theta[k["ln_coherence_scale"]])) if model.rolls else math.nan,
         contributions=contributions, budget_theta=budget_theta, variance_factors=tuple(factors.tolist()),
         sandwich=sandwich, calibration=calibration, notes=tuple(notes), model_fit=fit,
-        information_lost=tuple(tuple(float(x) for x in row) for row in lost), every_bin=model.grid_hz <= 0)
+        information_lost=tuple(tuple(float(x) for x in row) for row in lost),
+        every_bin=_singular(objective, theta, power))
 
 
 def _contributions(objective: WhittleObjective, theta: np.ndarray, theta_cov: np.ndarray, vehicle: AnyVehicle,

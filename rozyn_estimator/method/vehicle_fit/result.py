@@ -23,7 +23,8 @@ class Refinement(LikelihoodResult):
     calibration: VehicleCalibration | None = None  # the sensors and corners as the data calibrated them
     sandwich: SandwichRatio | None = None  # the taper's sandwich over the model's std, where taken
     model_fit: ModelFit | None = None  # the goodness-of-fit check
-    every_bin: bool = False  # S at every Fourier bin (nearly singular): the next window starts so
+    every_bin: bool = False  # S nearly singular at the optimum (floors at zero): the next window starts
+    # with S at every Fourier bin
 
     def to_dict(self) -> dict[str, object]:
         return {"status": self.status, "reason": self.reason,
