@@ -25,7 +25,7 @@ import numpy as np
 from rozyn_estimator.method.likelihood.score import lag_covariances, lag_partners, midpoint_bins
 from rozyn_estimator.method.likelihood.spectra import Spectra
 from rozyn_estimator.method.vehicle_fit.grid import apply, lagrange_matrix
-from rozyn_estimator.method.vehicle_fit.whittle import WhittleObjective
+from rozyn_estimator.method.vehicle_fit.whittle import WhittleObjective, mul
 
 _STEP_HZ = 0.2  # the midpoint rule's spacing (measured against 0.1 Hz: the std within 0.3 %
 # at 120 s and 4 % at 30 s; 0.1 Hz would double the work)
@@ -72,9 +72,9 @@ def score_covariance(objective: WhittleObjective, theta: np.ndarray, combos: np.
     C = C.astype(np.complex64)  # (n_δ, kc, k, k)
     partner, weight = lag_partners(starts, counts, bins, lags, K)
     q = combos.shape[0]
-    left = A[:, group[bins]][:, None] @ C[None]  # (q, n_δ, kc, k, k): A_k C_kk'
+    left = mul(A[:, group[bins]][:, None], C[None])  # (q, n_δ, kc, k, k): A_k C_kk'
     # tr(A_k C A_k' Cᴴ) = Σ left ⊙ (A_k' Cᴴ)ᵀ, and (A_k' Cᴴ)ᵀ = conj(C A_k') for Hermitian A
-    right = np.conj(C[None] @ A[:, group[partner]]) * weight.astype(np.float32)[None, :, :, None, None]
+    right = np.conj(mul(C[None], A[:, group[partner]])) * weight.astype(np.float32)[None, :, :, None, None]
     out = (left.reshape(q, -1) @ right.reshape(q, -1).T).real.astype(float)
     return 0.5 * (out + out.T)
 

@@ -32,7 +32,7 @@ import numpy as np
 from rozyn_estimator.method.likelihood.road_input import delay_bins, is_varying
 from rozyn_estimator.method.vehicle_fit.grid import apply, lagrange_matrix
 from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum, herm
-from rozyn_estimator.method.vehicle_fit.whittle import WhittleObjective
+from rozyn_estimator.method.vehicle_fit.whittle import WhittleObjective, mul
 
 GROUPS = 5  # the drive's delay bins in this many stretches of equal time (a group costs ~5 ms)
 
@@ -103,7 +103,7 @@ def road_parts(objective: WhittleObjective, theta: np.ndarray, parts: np.ndarray
 
 def pairs(A: np.ndarray, left: np.ndarray, right: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """(q,) ``Σ_k c_k Re tr(A_k L_k A_k R_k)`` per direction (``left``, ``right``: (K, k, k))."""
-    return traced(A @ left[None], A @ right[None], counts)
+    return traced(mul(A, left[None]), mul(A, right[None]), counts)
 
 
 def traced(X: np.ndarray, Y: np.ndarray, counts: np.ndarray) -> np.ndarray:
@@ -131,7 +131,7 @@ def stretched_factors(objective: WhittleObjective, theta: np.ndarray, A: np.ndar
     # A N for a diagonal N scales A's columns; A Ŝ_g once per stretch, and their weighted sum
     # is A times the whole road part (the stretches sum to it)
     a_noise = A * np.diagonal(local_noise)[None, None, None, :]
-    a_local = [A @ r[None] for r in local]
+    a_local = [mul(A, r[None]) for r in local]
     noise_pairs = traced(a_noise, a_noise, counts)
     varied = sum(w * (kappa * traced(ar, ar, counts) + 2.0 * traced(ar, a_noise, counts) + noise_pairs)
                  for w, ar in zip(stretches.fourth, a_local, strict=True))
