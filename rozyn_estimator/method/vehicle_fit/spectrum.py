@@ -47,6 +47,7 @@ from rozyn_estimator.method.likelihood.road_input import (
 )
 from rozyn_estimator.method.vehicle_fit.corner_matrices import corner_matrices, corner_response_derivatives
 from rozyn_estimator.method.vehicle_fit.grid import ALIAS_SPACING_HZ, alias_map, apply, evaluation_map
+from rozyn_estimator.method.vehicle_fit.stacks import herm, mul
 from rozyn_estimator.method.vehicle_fit.uncertainty import sensing as sensor_model
 
 
@@ -286,7 +287,8 @@ class VehicleSpectrum:
     def _spectrum(self, theta: np.ndarray, derivatives: bool) -> tuple[np.ndarray, np.ndarray | None]:
         sensing = self.sensing_at(theta)
         inv_d, _, _, motion, d_motion = self.body_motion(theta)
-        per_alias = sensing @ motion @ herm(sensing)  # (F, k, k)
+        seen = mul(motion, herm(sensing))  # the body's motion as the sensors see it
+        per_alias = mul(sensing, seen)  # (F, k, k)
         S_road = self.fold(per_alias)
         noise = np.exp(theta[self.noise_slice])
         S = S_road + np.eye(self.k) * (noise + self.min_noise_psd)
@@ -295,17 +297,18 @@ class VehicleSpectrum:
         dS = np.zeros((self.n_params, self.n_freq, self.k, self.k), dtype=complex)
         # ∂D = -ω² ∂M: ∂H = ω² D⁻¹ ∂M H, so ∂(P H R Hᴴ Pᴴ) = ω² P D⁻¹ ∂M (H R Hᴴ) Pᴴ + h.c.
         _, dM = self.body.mass_matrix(theta)
-        Q = (self.omega**2)[:, None, None] * (sensing @ inv_d)
-        part = (Q[None] @ dM[:, None]) @ (motion @ herm(sensing))  # (p, F, k, k); matmul: einsum is 4x slower
+        sensed = mul(sensing, inv_d)
+        Q = (self.omega**2)[:, None, None] * sensed
+        part = mul(mul(Q[None], dM[:, None]), seen[None])  # (p, F, k, k)
         if self.gravity_height_m != 0.0:  # ∂D/∂ln m also holds the weight's stiffness: ∂H = -D⁻¹ K_g H
-            part[0] -= (sensing @ inv_d) @ self.body.gravity_stiffness(theta) @ (motion @ herm(sensing))
+            part[0] -= mul(mul(sensed, self.body.gravity_stiffness(theta)), seen)
         # the body's, the road shape's and the coherence's derivatives folded in one pass (one
         # sparse product: the same sums as one each, a fraction of the calls)
         shape = self.shape_basis.shape[0]
         folded = self.fold(np.concatenate([
             part, -self.log_shape[None, :, None, None] * per_alias,
             self.shape_basis[:, :, None, None] * per_alias,
-            *([(sensing @ d_motion @ herm(sensing))[None]] if self.rolls else [])]))
+            *([mul(sensing, mul(d_motion, herm(sensing)))[None]] if self.rolls else [])]))
         nb = self.n_body
         dS[:nb] = folded[:nb]
         dS[:nb] += herm(dS[:nb])
@@ -365,11 +368,11 @@ class VehicleSpectrum:
         M, _ = self.body.mass_matrix(theta)
         inv_d = np.linalg.inv(self.body_stiffness + self.body.gravity_stiffness(theta)
                               - (self.omega**2)[:, None, None] * M)
-        H = inv_d @ self.body_input
+        H = mul(inv_d, self.body_input)
         weight = self.road_weight(theta)[:, None, None]
         if not self.rolls:  # one track: the axles' delay alone
             inputs = weight * self.delay
-            motion = H @ inputs @ herm(H)
+            motion = mul(mul(H, inputs), herm(H))
             self._body_key, self._body_value = key, (inv_d, H, inputs, motion, np.zeros_like(motion))
             return self._body_value
         scale = math.exp(theta[self.index["ln_coherence_scale"]])
@@ -410,7 +413,3 @@ class VehicleSpectrum:
         total = aliased.sum(axis=-4)
         return out + (total if self._alias_fold is None else self._alias_fold(total))
 
-
-def herm(m: np.ndarray) -> np.ndarray:
-    """The conjugate transpose of stacked matrices."""
-    return m.conj().swapaxes(-1, -2)

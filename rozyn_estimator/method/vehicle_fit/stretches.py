@@ -31,8 +31,9 @@ import numpy as np
 
 from rozyn_estimator.method.likelihood.road_input import delay_bins, is_varying
 from rozyn_estimator.method.vehicle_fit.grid import apply, lagrange_matrix
-from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum, herm
-from rozyn_estimator.method.vehicle_fit.whittle import WhittleObjective, mul
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
+from rozyn_estimator.method.vehicle_fit.stacks import herm, mul
+from rozyn_estimator.method.vehicle_fit.whittle import WhittleObjective
 
 GROUPS = 5  # the drive's delay bins in this many stretches of equal time (a group costs ~5 ms)
 

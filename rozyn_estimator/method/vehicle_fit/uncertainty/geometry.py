@@ -26,7 +26,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from rozyn_estimator.method.likelihood.road_input import delay_slope, track_coherence
-from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum, herm
+from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
+from rozyn_estimator.method.vehicle_fit.stacks import herm
 
 GEOMETRY = ("wheelbase_m", "track_front_m", "track_rear_m")
 _BAR = {"track_front_m": (20, "anti_roll_stiffness_front_nmprad"),
