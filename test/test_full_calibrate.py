@@ -147,7 +147,6 @@ def test_a_value_far_beyond_its_tolerance_is_noted() -> None:
     moved = np.zeros(14)
     assert cal.holds(moved) and not cal.holds(moved + 0.02)
     assert not dataclasses.replace(cal, age=10).holds(moved)
-    assert not dataclasses.replace(cal, converged=False).holds(moved)
 
 
 def test_derivatives_by_the_corner_values_match_differences() -> None:
@@ -246,3 +245,33 @@ def test_a_failed_calibration_leaves_the_fit_completed_and_the_first_order_budge
     np.testing.assert_allclose(std, first_std, rtol=0.02)
     assert any(n.startswith("calibration failed (the posterior is not finite)") for n in est.notes)
     assert not any("not converged" in n for n in est.notes), est.notes
+
+
+def test_an_optimiser_stopped_short_of_the_mode_is_a_failed_calibration(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A calibration whose optimiser stops short of the posterior's mode (its iterations spent,
+    or its trust region collapsed: an urban window's corner values wandered to a tyre's
+    stiffness at -29 % and moved l_f by +13 %, six std) is no calibration: the first-order
+    budget stands, with a note, and the next window does not start from its values."""
+    from scipy.optimize import OptimizeResult
+
+    sim = SimConfig(model="full", full_vehicle=CAR, road=RoadSpec(amplitudes="gaussian"), seed=4,
+                    noise_std_mps2=0.05)
+    y = Simulation(sim).run(120.0).accel_mps2
+    _, first_std, first = _fit(y, FIRST_ORDER)
+
+    def short(objective: object, theta: np.ndarray, tol: float, max_iter: int,
+              body: int = 0) -> OptimizeResult:
+        value = objective.fun(theta)  # type: ignore[attr-defined]
+        return OptimizeResult(x=theta, fun=value, nit=max_iter, success=False)
+
+    monkeypatch.setattr(calibrate, "_FAR", 0.0)  # no one-step estimator: the optimiser's route ...
+    monkeypatch.setattr(calibrate, "_CONVERGED", 0.0)  # ... and it did not get there
+    monkeypatch.setattr(calibrate, "scoring", short)
+    _, std, est = _fit(y, CALIBRATING)
+    assert est.refinement is not None and est.refinement.calibration is None
+    stopped = "calibration failed (its optimiser stopped short of the posterior's mode after 100 iterations"
+    assert any(n.startswith(stopped) for n in est.notes), est.notes
+    assert est.params is not None and first.params is not None
+    assert np.all(np.abs(est.params - first.params) < 0.05 * first_std)
+    np.testing.assert_allclose(std, first_std, rtol=0.02)

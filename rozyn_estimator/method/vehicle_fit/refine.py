@@ -273,7 +273,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
                                                  calibration, fit is not None and not fit.ok)
     # the calibration's step completes the fit's convergence (tol_calibrated)
     done = converged(objective, theta, cfg.tol if calibration is None else cfg.tol_calibrated, model.n_body)
-    if not done or not (calibration is None or calibration.converged):
+    if not done:
         notes.append(f"likelihood fit: not converged in {cfg.max_iter} iterations")
     k, lost = model.index, information_lost(*objective.sampled_model(theta), jac, every=4)  # every 12th bin
     return Refinement(

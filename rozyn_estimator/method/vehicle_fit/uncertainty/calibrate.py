@@ -75,7 +75,6 @@ class VehicleCalibration:
     calibrations: tuple[Calibration, ...]  # each calibrated value: estimate, posterior std, tolerance
     contributions: dict[str, np.ndarray]  # what each value's remaining uncertainty adds to (n_body,)
     body: np.ndarray  # θ's body parameters (ln m, ln I_xx, ln I_yy, logit l_f, y_c [m]) it was taken at
-    converged: bool = True  # False: the optimiser stopped at its iteration limit
     age: int = 0  # the later windows that took it over
     corner_keys: tuple[str, ...] = ()  # the calibrated corner values' tolerance keys (:mod:`.corners`)
     corner_shares: np.ndarray = field(default_factory=lambda: np.zeros(0))  # their departures (shares)
@@ -87,7 +86,7 @@ class VehicleCalibration:
         """A warm update may take it over (values and contributions): the body's parameters
         moved by less than ``_KEEP_MOVE`` since, and it is younger than ``_KEEP_UPDATES``
         windows (the vehicle does not change; the later windows' data refresh it)."""
-        return self.converged and self.age < _KEEP_UPDATES and \
+        return self.age < _KEEP_UPDATES and \
             float(np.max(np.abs(theta[: self.body.size] - self.body))) < _KEEP_MOVE
 
     def departures(self) -> list[str]:
@@ -165,7 +164,6 @@ def calibrate_vehicle(
     info = posterior.information(point)
     held = _floors_at_zero(point, base.noise_slice, power)
     step, std = _scoring_step(info, precision, grad, held)
-    converged = True
     near = bool(np.all(np.abs(step) <= _FAR * std)) and \
         bool(np.all(np.abs(step[base.noise_slice]) <= _FLOOR_STEP))
     if near:  # the one-step estimator: the information at its start stands for the mode's
@@ -192,7 +190,10 @@ def calibrate_vehicle(
         if revived is not None:
             again = scoring(posterior, revived, _CONVERGED, max_iter)
             found = again if again.fun < found.fun else found
-        point, converged = found.x, bool(found.get("success")) or posterior.decrement(found.x) < _CONVERGED
+        point, remaining = found.x, posterior.decrement(found.x)
+        if not (found.get("success") or remaining < _CONVERGED):
+            raise ValueError(f"its optimiser stopped short of the posterior's mode after {found.nit} "
+                             f"iterations (Newton decrement {remaining:.2g})")
         info = posterior.information(point)
     contributions, posterior_std, varying = _contributions(info, model, point, precision[n:], vehicle,
                                                            base.sensors, labels)
@@ -202,7 +203,7 @@ def calibrate_vehicle(
                          if not _held(name, gyros))
     n_sensor = fitted.size - len(corner_keys)
     calibration = VehicleCalibration(groups, _every(fitted[:n_sensor], groups, k), calibrations,
-                                     contributions, point[: base.n_body].copy(), converged,
+                                     contributions, point[: base.n_body].copy(),
                                      corner_keys=corner_keys,
                                      corner_shares=fitted[n_sensor:].copy(), varying=varying)
     return point[:n], calibration, Posterior(posterior, point)
