@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from rozyn_estimator.method import Estimate
-from rozyn_estimator.method.budget import Budget
+from rozyn_estimator.method.budget import Budget, Calibration
 from rozyn_estimator.method.config import FULL_PARAM_NAMES
 from rozyn_estimator.online.batch import SpeedSamples
 from rozyn_estimator.online.fusion import (
@@ -151,6 +151,30 @@ def test_calibrated_values_that_vary_between_windows_are_no_load_change():
                 fusion.add(est, lo, hi, [stop] if lo < stop[0] < hi else [])
             found[counted] += len(fusion.changes)
     assert found[True] == 0 and found[False] >= 5
+
+
+def test_a_window_whose_calibration_failed_is_tested_with_its_tolerances_part():
+    """A window whose calibration failed (its first-order budget stands) differs from the
+    calibrated windows before the stop by what their calibration moved, within the tolerances'
+    part: that part is not common to both, and counts in the test. Calibrated alike, the same
+    difference is a change (the systematic part common, the statistical one alone counts)."""
+    calibration = (Calibration("tyre_stiffness_front_npm", 0.0, 0.05, 0.1),)
+    base, systematic = np.array([1000.0, 2000.0, 1.2]), np.array([30.0, 60.0, 0.03])
+    stop = (int(400 * S), int(410 * S))
+
+    def window(params: np.ndarray, calibrated: bool) -> Estimate:
+        budget = Budget(np.diag(STD**2), {"k": systematic}, calibration=calibration if calibrated else ())
+        return Estimate(status="ok", params=params, covariance=budget.total, budget=budget)
+
+    found = {}
+    for after_calibrated in (False, True):
+        fusion = Fusion()
+        for lo, hi in _windows(0.0, 14):
+            after = lo >= stop[1]
+            est = window(base + 2.0 * systematic * after, calibrated=after_calibrated or not after)
+            fusion.add(est, lo, hi, [stop] if lo < stop[0] < hi else [])
+        found[after_calibrated] = len(fusion.changes)
+    assert found == {False: 0, True: 1}
 
 
 def test_a_window_holding_data_from_before_the_change_publishes_the_estimate_since():

@@ -13,7 +13,8 @@ statistical one plus the newest window's systematic one.
 A stop of at least :data:`MIN_STOP_S` (the speed below the driving threshold) is where the load
 may change. Once a window lies wholly after such a stop, it is tested against the fused
 estimate of the windows wholly before it (two disjoint data sets: only their statistical parts
-count, the systematic part is common to both): ``χ² = dᵀ (S_after + P_before⁻¹)⁻¹ d`` on ``k``
+count, the systematic part is common to both where both were calibrated alike, else the
+window's counts too: :func:`_not_common`): ``χ² = dᵀ (S_after + P_before⁻¹)⁻¹ d`` on ``k``
 degrees of freedom. So that this comes soon, the first update with a window's worth of
 driving after a stop (``min_window_fill`` of ``window_s``) estimates from the driving after it
 alone (:meth:`Fusion.test_cut`), a probe that is fused only where it found a change (a window
@@ -78,6 +79,7 @@ class Chain:
     weighted: np.ndarray  # (k,) Σ S_i⁻¹ θ_i
     windows: int
     unsteady: int = 0  # of them stop-and-go windows (masked in part)
+    calibrated: int = 0  # of them windows whose data calibrated the tolerances' values
 
     @property
     def covariance(self) -> np.ndarray:
@@ -172,9 +174,10 @@ class Fusion:
             self._fused, self._windows = est, 1
             return est
         before = self._best(lo_ns)
-        chain = Chain(lo_ns, hi_ns, info, info @ est.params, 1, int(unsteady)) if before is None else \
-            Chain(lo_ns, hi_ns, before.info + info, before.weighted + info @ est.params, before.windows + 1,
-                  before.unsteady + int(unsteady))
+        own = Chain(lo_ns, hi_ns, info, info @ est.params, 1, int(unsteady), int(_calibrated(est)))
+        chain = own if before is None else Chain(
+            lo_ns, hi_ns, before.info + info, before.weighted + own.weighted, before.windows + 1,
+            before.unsteady + own.unsteady, before.calibrated + own.calibrated)
         self._chains = [*self._chains, chain][-MAX_CHAINS:]
         self._fused, self._windows = _published(est, chain), chain.windows
         return self._fused
@@ -217,8 +220,9 @@ class Fusion:
             # the calibrated values vary too: this window's afresh, the fused ones' averaged down
             share = 1.0 + 1.0 / before.windows
             varying = 0.0 if est.budget is None else est.budget.varying_covariance * share
+            cov = stat + varying + _not_common(est, stat, before) + before.covariance
             try:
-                z2 = float(d @ np.linalg.solve(stat + varying + before.covariance, d))
+                z2 = float(d @ np.linalg.solve(cov, d))
             except np.linalg.LinAlgError:
                 continue
             p = float(chi2.sf(z2, d.size))
@@ -232,6 +236,22 @@ class Fusion:
                 self._restart_ns = end - 1
                 self._chains = []
                 self._stops = {s: e for s, e in self._stops.items() if s > last}
+
+
+def _calibrated(est: Estimate) -> bool:
+    """Whether the window's data calibrated the tolerances' values (not: none to calibrate,
+    calibration off, or failed and the first-order budget stands)."""
+    return est.budget is not None and bool(est.budget.calibration)
+
+
+def _not_common(est: Estimate, stat: np.ndarray, before: Chain) -> np.ndarray | float:
+    """The window's systematic covariance where the windows before were not calibrated as it was
+    (0: calibrated alike, the systematic part common to both): a calibration moves an estimate
+    within its tolerances' part, so an uncalibrated window (its calibration failed) differs from
+    calibrated ones by up to that (two urban drives of the full car found a load change where
+    there was none, at 1.0 and 1.4 of the window's whole std)."""
+    alike = before.calibrated in (0, before.windows) and (before.calibrated > 0) == _calibrated(est)
+    return 0.0 if alike or est.covariance is None else est.covariance - stat
 
 
 def _published(est: Estimate, chain: Chain) -> Estimate:
