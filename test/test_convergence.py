@@ -116,3 +116,16 @@ def test_a_window_after_noise_free_data_goes_back_to_the_grid():
     singular = dataclasses.replace(cold, refinement=dataclasses.replace(cold.refinement, every_bin=True))
     warm = estimate(second, 100.0, EXACT, PipelineConfig(), 100 / 3.6, warm_start=singular)
     assert warm.ok and not warm.refinement.every_bin
+
+
+def test_a_fit_stopped_before_it_converged_says_how_far_it_got():
+    """The note names the iterations run of the limit and the Newton decrement left (it had
+    said 'not converged in 100 iterations' after three)."""
+    y, v = _urban_window(270.0)
+    short = dataclasses.replace(LikelihoodConfig(), max_iter=1, second_start=False)
+    est = estimate(y, 100.0, EXACT, PipelineConfig(likelihood=short), v)
+    assert est.ok and est.refinement is not None
+    note = next(n for n in est.notes if n.startswith("likelihood fit: not converged"))
+    assert note.startswith(f"likelihood fit: not converged after {est.refinement.iterations} of 1 iterations "
+                           "(Newton decrement "), note
+    assert float(note.rsplit(" ", 1)[1].rstrip(")")) > LikelihoodConfig().tol

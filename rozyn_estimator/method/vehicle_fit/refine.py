@@ -272,9 +272,9 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
     contributions, budget_theta = _contributions(objective, theta, theta_cov, model.vehicle, warm,
                                                  calibration, fit is not None and not fit.ok)
     # the calibration's step completes the fit's convergence (tol_calibrated)
-    done = converged(objective, theta, cfg.tol if calibration is None else cfg.tol_calibrated, model.n_body)
-    if not done:
-        notes.append(f"likelihood fit: not converged in {cfg.max_iter} iterations")
+    if not converged(objective, theta, cfg.tol if calibration is None else cfg.tol_calibrated, model.n_body):
+        notes.append(f"likelihood fit: not converged after {iterations} of {cfg.max_iter} iterations "
+                     f"(Newton decrement {objective.decrement(theta):.2g})")
     k, lost = model.index, information_lost(*objective.sampled_model(theta), jac, every=4)  # every 12th bin
     return Refinement(
         status="ok", params=params, covariance=0.5 * (cov + cov.T), theta=theta, names=tuple(model.names),
