@@ -83,12 +83,14 @@ def test_stop_and_go_windows_keep_their_models_floor_which_fusing_does_not_reduc
         np.testing.assert_allclose(np.diag(out.covariance), STD**2 / 7 + floor**2)
 
 
-def test_the_cogs_position_keeps_half_the_floor_and_the_lateral_one_of_a_metre():
-    """l_f's and y_c's measured bias on urban windows is a quarter to a half of the inertias':
-    their floors are half the others' share (y_c's of 1 m, as it may be 0)."""
+def test_the_cogs_position_keeps_half_the_floor_and_the_lateral_one_a_share_of_itself():
+    """l_f's measured bias on urban windows is a quarter to a half of the inertias': its floor is
+    half their share. y_c's is the inertias' share of itself: a symmetric car's cannot be biased
+    by the drive (mirrored, it reads mirrored), an asymmetric car's bias is odd in y_c."""
     params = np.array([1000.0, 400.0, 2000.0, 1.2, 0.0])
-    floor = drive_model_floor(FULL_PARAM_NAMES, params)
-    np.testing.assert_allclose(floor, [3.0, 1.2, 6.0, 0.0018, 0.0015])
+    np.testing.assert_allclose(drive_model_floor(FULL_PARAM_NAMES, params), [3.0, 1.2, 6.0, 0.0018, 0.0])
+    params[4] = -0.03  # 3 cm right of the centreline
+    assert drive_model_floor(FULL_PARAM_NAMES, params)[4] == pytest.approx(DRIVE_MODEL_FLOOR * 0.03)
     assert DRIVE_MODEL_FLOORS["cog_from_front_axle_m"] == DRIVE_MODEL_FLOOR / 2
 
 
