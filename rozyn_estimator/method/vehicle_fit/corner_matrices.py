@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from rozyn_estimator.body_model import AnyVehicle, corner_count
+from rozyn_estimator.method.vehicle_fit.stacks import mul
 
 
 def bar_pairs(v: AnyVehicle) -> list[tuple[int, float]]:
@@ -23,8 +24,8 @@ def corner_matrices(v: AnyVehicle, s: np.ndarray) -> tuple[np.ndarray, np.ndarra
     road heights under the wheels): ``N = Z_s + Z_t + m_t s²`` the wheels' dynamic stiffness,
     ``Z = Z_s - Z_s N⁻¹ Z_s`` and ``T = Z_s N⁻¹ Z_t`` (the likelihood's corners)."""
     _, zs, zt, A = _corner_parts(v, s)
-    zs_a = zs @ A
-    return zs - zs_a @ zs, zs_a * zt[:, None, :]
+    zs_a = mul(zs, A)
+    return zs - mul(zs_a, zs), zs_a * zt[:, None, :]
 
 
 def axle_inverse(n: np.ndarray) -> np.ndarray:
@@ -70,7 +71,7 @@ def corner_matrix_derivatives(v: AnyVehicle, s: np.ndarray, directions: np.ndarr
     ``Z_s`` symmetric, so ``Z_s A = (A Z_s)ᵀ``)."""
     s, zs, zt, A = _corner_parts(v, s)
     n = zt.shape[-1]
-    a_zs = A @ zs
+    a_zs = mul(A, zs)
     d = np.asarray(directions, dtype=float)
     ks, cs, kt, ct, mu = (d[:, None, n * i: n * i + n] for i in range(5))  # (G, 1, c) each
     bars = np.zeros((d.shape[0], n, n))
@@ -82,8 +83,8 @@ def corner_matrix_derivatives(v: AnyVehicle, s: np.ndarray, directions: np.ndarr
     d_zt = kt + s * ct  # (G, F, c) diagonal
     d_n = d_zs + (d_zt + mu * s * s)[..., None] * eye
     zs_a = a_zs.swapaxes(-1, -2)
-    d_z = d_zs - d_zs @ a_zs - zs_a @ d_zs + zs_a @ d_n @ a_zs
-    d_t = (d_zs - zs_a @ d_n) @ A * zt[:, None, :] + zs_a * d_zt[..., None, :]
+    d_z = d_zs - mul(d_zs, a_zs) - mul(zs_a, d_zs) + mul(mul(zs_a, d_n), a_zs)
+    d_t = mul(d_zs - mul(zs_a, d_n), A) * zt[:, None, :] + zs_a * d_zt[..., None, :]
     return d_z, d_t
 
 
@@ -99,8 +100,8 @@ def corner_response_derivatives(v: AnyVehicle, s: np.ndarray, directions: np.nda
     evaluation, and the stacked (G, F, c, c) products were two thirds of that time."""
     s, zs, zt, A = _corner_parts(v, s)
     n = zt.shape[-1]
-    zs_a = zs @ A
-    w = q - A @ (zs @ q + zt[:, :, None] * r)  # q - A Z_s q - A Z_t r
+    zs_a = mul(zs, A)
+    w = q - mul(A, mul(zs, q) + zt[:, :, None] * r)  # q - A Z_s q - A Z_t r
     in_wheels = q - w  # A Z_s q + A Z_t r
     d = np.asarray(directions, dtype=float)[:, None, :, None]  # (G, 1, values, 1)
     ks, cs, kt, ct, mu = (d[:, :, n * i: n * i + n] for i in range(5))  # (G, 1, c, 1) each
@@ -112,4 +113,4 @@ def corner_response_derivatives(v: AnyVehicle, s: np.ndarray, directions: np.nda
         d_zs_w[:, :, first + 1] -= bar
     wheel = (kt + s[..., None] * ct) * (r - in_wheels) - mu * (s * s)[..., None] * in_wheels
     stacked = np.concatenate([-d_zs_w, d_zs_w + wheel], axis=2)  # (G, F, 2c, k)
-    return np.concatenate([left, left @ zs_a], axis=2) @ stacked
+    return mul(np.concatenate([left, mul(left, zs_a)], axis=2), stacked)

@@ -83,7 +83,7 @@ def road_parts(objective: WhittleObjective, theta: np.ndarray, parts: np.ndarray
     model: VehicleSpectrum = objective.model
     assert model.mixture is not None
     _, H, _, _, _ = model.body_motion(theta)
-    reads = model.sensing_at(theta) @ H
+    reads = mul(model.sensing_at(theta), H)
     weight = model.road_weight(theta)[:, None, None]
     scale = float(np.exp(theta[model.index["ln_coherence_scale"]])) if model.rolls else 0.0
     nodes = []
@@ -91,7 +91,7 @@ def road_parts(objective: WhittleObjective, theta: np.ndarray, parts: np.ndarray
         mix = model.mixture.part(keep)
         delay = np.stack([mix.share, mix.phi.conj(), mix.phi, mix.share], axis=-1).reshape(-1, 2, 2)
         inputs = weight * (model.road_inputs(mix.coherence(scale)[0], delay=delay) if model.rolls else delay)
-        nodes.append(model.fold(reads @ inputs @ herm(reads)))
+        nodes.append(model.fold(mul(mul(reads, inputs), herm(reads))))
     at_nodes = np.stack(nodes)
     at = np.arange(model.freq_hz.size) if at is None else at
     if model.grid_hz <= 0:  # S at each frequency: the nodes are the targets, with one beyond each
