@@ -185,8 +185,8 @@ class VehicleSpectrum:
             self._corners, self._body_key = corners, None
             Z, T = self.corner_impedance = corner_matrices(v, 1j * w)  # (F, c, c) each
             B = self.body_map = np.column_stack([np.ones(c.count), -c.x_m, c.y_m])[:, : self.body.coordinates]
-            self.body_stiffness = B.T @ Z @ B  # Bᵀ Z B
-            self.body_input = B.T @ T  # Bᵀ T
+            self.body_stiffness = mul(mul(B.T, Z), B)  # Bᵀ Z B
+            self.body_input = mul(B.T, T)  # Bᵀ T
             self.gravity_height_m = gravity_height_m(v)
             self.unsprung_total_kg = float(c.unsprung_mass_kg.sum())
             self.body = BodyParameters(self.wheelbase_m, self.rolls, self.gravity_height_m,
@@ -328,7 +328,7 @@ class VehicleSpectrum:
         values = sensor_model.unpack(theta[self.calibration_slice], self.calibrate, self.k)
         d_sensing = sensor_model.derivatives(self.sensing, self.omega, self.layout, values, self.calibrate)
         _, _, _, motion, _ = self.body_motion(theta)
-        part = d_sensing @ (motion @ herm(self.sensing_at(theta)))
+        part = mul(d_sensing, mul(motion, herm(self.sensing_at(theta))))
         return self.fold(part + herm(part))
 
     def corner_derivatives(self, theta: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -341,12 +341,12 @@ class VehicleSpectrum:
         B = self.body_map
         sensing = self.sensing_at(theta)  # with θ's calibrated sensors, if it holds them
         # P dH R Hᴴ Pᴴ = (P D⁻¹ Bᵀ) (dT R Hᴴ Pᴴ - dZ B H R Hᴴ Pᴴ)
-        part = corner_response_derivatives(self.vehicle, 1j * self.omega, directions, sensing @ inv_d @ B.T,
-                                           B @ motion @ herm(sensing),
-                                           weighted_inputs @ herm(H) @ herm(sensing))
+        seen, sensed = mul(motion, herm(sensing)), mul(sensing, inv_d)
+        part = corner_response_derivatives(self.vehicle, 1j * self.omega, directions, mul(sensed, B.T),
+                                           mul(B, seen), mul(weighted_inputs, mul(herm(H), herm(sensing))))
         if slope := self.body.swing_slope(theta):  # ∂M = slope dM_u on the rotations: ∂H = ω² D⁻¹ ∂M H
             n, rotations = B.shape[0], np.diag([0.0, 1.0, 1.0][: B.shape[1]])
-            swing = (self.omega**2)[:, None, None] * (sensing @ inv_d) @ rotations @ motion @ herm(sensing)
+            swing = (self.omega**2)[:, None, None] * mul(mul(sensed, rotations), seen)
             part += slope * np.asarray(directions)[:, 4 * n: 5 * n].sum(axis=1)[:, None, None, None] * swing
         return self.fold(part + herm(part))
 
@@ -355,7 +355,7 @@ class VehicleSpectrum:
         (a sensor's position, gain or timing): S is ``P_s (H R Hᴴ) P_sᴴ`` and the body's
         motion stays."""
         _, _, _, motion, _ = self.body_motion(theta)
-        part = d_sensing @ (motion @ herm(self.sensing))
+        part = mul(d_sensing, mul(motion, herm(self.sensing)))
         return self.fold(part + herm(part))
 
     def body_motion(self, theta: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -379,8 +379,8 @@ class VehicleSpectrum:
         gamma, d_gamma = self.mixture.coherence(scale) if self.mixture is not None else \
             track_coherence(self.x_coherence * scale)
         inputs = weight * self.road_inputs(gamma)
-        motion = H @ inputs @ herm(H)
-        d_motion = H @ (weight * self.road_inputs(d_gamma, diagonal=0.0)) @ herm(H)
+        motion = mul(mul(H, inputs), herm(H))
+        d_motion = mul(mul(H, weight * self.road_inputs(d_gamma, diagonal=0.0)), herm(H))
         self._body_key, self._body_value = key, (inv_d, H, inputs, motion, d_motion)
         return self._body_value
 
