@@ -25,7 +25,6 @@ _HESSIAN_MIN = 300  # ... of models with at least this many frequencies
 _NUISANCE_DECREMENT = 0.1
 
 
-
 class WhittleObjective:
     """ℓ(θ), ∇ℓ and the Fisher information of a window's periodogram matrices (cached at the
     last θ).

@@ -190,8 +190,8 @@ def calibrate_vehicle(
         if revived is not None:
             again = scoring(posterior, revived, _CONVERGED, max_iter)
             found = again if again.fun < found.fun else found
-        point, remaining = found.x, posterior.decrement(found.x)
-        if not (found.get("success") or remaining < _CONVERGED):
+        point = found.x
+        if not found.get("success") and (remaining := posterior.decrement(point)) >= _CONVERGED:
             raise ValueError(f"its optimiser stopped short of the posterior's mode after {found.nit} "
                              f"iterations (Newton decrement {remaining:.2g})")
         info = posterior.information(point)
