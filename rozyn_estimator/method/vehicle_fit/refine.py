@@ -167,7 +167,7 @@ def _refine(y: np.ndarray, fs: float, vehicle: AnyVehicle, sensors: tuple[int, .
     def run(theta0: np.ndarray, max_iter: int, cold: bool = False, tol: float | None = None) -> None:
         nonlocal best, iterations, starts
         res = scoring(objective, ahead(theta0) if cold else theta0, fit_cfg.tol if tol is None else tol,
-                      max_iter, model.n_body)
+                      max_iter, model.n_body, near=not cold)
         iterations, starts = iterations + int(res.nit), starts + 1
         if np.isfinite(res.fun) and (best is None or res.fun < best.fun):
             best = res

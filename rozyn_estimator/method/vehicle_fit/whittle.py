@@ -23,6 +23,9 @@ _HESSIAN_MIN = 300  # ... of models with at least this many frequencies
 # a fit for the body parameters converges once their step is below the tolerance and the
 # whole decrement below this: ℓ within 0.05 nats, the nuisances' quadratic model trusted
 _NUISANCE_DECREMENT = 0.1
+_FLOOR_RISE = 2.0  # a line-search step raises a noise floor's log by at most this (_line_scoring)
+_FLOOR_FALL = 30.0  # ... and lowers it by at most this (a floor e^-30 of where it was is at zero)
+_BACKTRACKS = (1.0, 0.3, 0.09, 0.027)  # the step lengths a line search tries
 
 
 class WhittleObjective:
@@ -286,19 +289,63 @@ class WhittleObjective:
 
 
 def scoring(objective: WhittleObjective, theta0: np.ndarray, tol: float, max_iter: int,
-            body: int = 0) -> OptimizeResult:
+            body: int = 0, near: bool = False) -> OptimizeResult:
     """Scoring by scipy's trust-region method (the Fisher information as the Hessian) until
-    :func:`converged`; ``fun`` inf when θ0 gives no finite ℓ."""
+    :func:`converged`; ``fun`` inf when θ0 gives no finite ℓ. From a start ``near`` the optimum
+    (the last window's), :func:`_line_scoring` steps first, the trust region going on from
+    where it stops short."""
     def stop_when_converged(intermediate_result: OptimizeResult) -> None:
         if converged(objective, intermediate_result.x, tol, body):
             raise StopIteration
 
-    if not np.isfinite(objective.fun(theta0)):
+    value = objective.fun(theta0)
+    if not np.isfinite(value):
         return OptimizeResult(x=theta0, fun=math.inf, nit=0)
-    if converged(objective, theta0, tol, body):
-        return OptimizeResult(x=theta0, fun=objective.fun(theta0), nit=0)
-    return minimize(objective.fun, theta0, jac=objective.jac, hess=objective.hess, method="trust-exact",
-                    callback=stop_when_converged, options={"gtol": 1e-12, "maxiter": max_iter})
+    walked = 0
+    if near:
+        theta0, value, walked = _line_scoring(objective, theta0, value, tol, max_iter, body)
+    done = converged(objective, theta0, tol, body)
+    if done or walked >= max_iter:
+        return OptimizeResult(x=theta0, fun=value, nit=walked, success=done)
+    res = minimize(objective.fun, theta0, jac=objective.jac, hess=objective.hess, method="trust-exact",
+                   callback=stop_when_converged, options={"gtol": 1e-12, "maxiter": max_iter - walked})
+    res.nit += walked
+    return res
+
+
+def _line_scoring(objective: WhittleObjective, theta: np.ndarray, value: float, tol: float,
+                  max_iter: int, body: int) -> tuple[np.ndarray, float, int]:
+    """(θ, ℓ, steps) of scoring steps with a backtracking line search, until :func:`converged`
+    or a step finds no descent.
+
+    A start from the last window's optimum is within a step or two of the body's (the Fisher
+    information models ℓ well there), but a noise floor's log may not be: the floors are a
+    small share of an urban window's power and swing within their wide std, the scoring step
+    taking a floor towards zero by tens in its log. A trust region spends its radius on that
+    log, and the body crawls with it (7-8 iterations a window, measured). Here a floor falls
+    as far as its step says (ℓ is flat below a floor's share of 1e-6: the step's size there
+    costs nothing), rises by at most :data:`_FLOOR_RISE` (ℓ's curvature in the log changes
+    sign as the floor overtakes the signal), and the other parameters take the step that is
+    best given the floors' (the quadratic model minimised with those held)."""
+    noise = np.arange(theta.size)[objective.model.noise_slice]
+    steps = 0
+    while steps < max_iter and not converged(objective, theta, tol, body):
+        grad, newton = newton_step(objective, theta)
+        step, hess = -newton, objective.hess(theta)
+        held = noise[(step[noise] > _FLOOR_RISE) | (step[noise] < -_FLOOR_FALL)]
+        if held.size:
+            free = np.setdiff1d(np.arange(theta.size), held)
+            step[held] = np.clip(step[held], -_FLOOR_FALL, _FLOOR_RISE)
+            given = grad[free] + hess[np.ix_(free, held)] @ step[held]
+            step[free] = -np.linalg.solve(hess[np.ix_(free, free)], given)
+        for t in _BACKTRACKS:
+            trial = objective.fun(theta + t * step)
+            if trial <= value + 1e-4 * t * float(grad @ step):  # Armijo's sufficient decrease
+                theta, value, steps = theta + t * step, trial, steps + 1
+                break
+        else:
+            break
+    return theta, value, steps
 
 
 def converged(objective: WhittleObjective, theta: np.ndarray, tol: float, body: int = 0) -> bool:
