@@ -261,7 +261,7 @@ def test_an_optimiser_stopped_short_of_the_mode_is_a_failed_calibration(
     _, first_std, first = _fit(y, FIRST_ORDER)
 
     def short(objective: object, theta: np.ndarray, tol: float, max_iter: int,
-              body: int = 0) -> OptimizeResult:
+              body: int = 0, near: bool = False) -> OptimizeResult:
         value = objective.fun(theta)  # type: ignore[attr-defined]
         return OptimizeResult(x=theta, fun=value, nit=max_iter, success=False)
 

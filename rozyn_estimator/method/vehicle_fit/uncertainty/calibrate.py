@@ -181,14 +181,14 @@ def calibrate_vehicle(
         # far off: the nuisances that absorbed the departure (a noise floor) must move back, or
         # the corners too nonlinear for two steps: scoring to the mode
         found = scoring(posterior, point if near else backtracked(posterior.fun, point, step, value),
-                        _CONVERGED, max_iter)
+                        _CONVERGED, max_iter, near=True)
         # a floor that absorbed the departure and ran to its boundary does not come back by
         # scoring (no gradient there): revived as the fit's are (a rear sensor 5 ms late left
         # the front floor at zero and the half car's l_f 1.8 std off)
         revived = None if power is None else aground(posterior, found.x, float(found.fun), base.noise_slice,
                                                      power)
         if revived is not None:
-            again = scoring(posterior, revived, _CONVERGED, max_iter)
+            again = scoring(posterior, revived, _CONVERGED, max_iter, near=True)
             found = again if again.fun < found.fun else found
         point = found.x
         if not found.get("success") and (remaining := posterior.decrement(point)) >= _CONVERGED:

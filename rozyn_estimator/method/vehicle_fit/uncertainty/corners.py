@@ -82,7 +82,7 @@ class CornerCalibrating:
         self.n_params = len(self.names)
         self.index = {name: i for i, name in enumerate(self.names)}
         self.calibration_slice = slice(model.calibration_slice.start, self.n_params)
-        self.sensors, self.k = model.sensors, model.k
+        self.sensors, self.k, self.noise_slice = model.sensors, model.k, model.noise_slice
 
     def split(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(the model's θ, the shares)."""
