@@ -292,8 +292,8 @@ def scoring(objective: WhittleObjective, theta0: np.ndarray, tol: float, max_ite
             body: int = 0, near: bool = False) -> OptimizeResult:
     """Scoring by scipy's trust-region method (the Fisher information as the Hessian) until
     :func:`converged`; ``fun`` inf when θ0 gives no finite ℓ. From a start ``near`` the optimum
-    (the last window's), :func:`_line_scoring` steps first, the trust region going on from
-    where it stops short."""
+    (the last window's, a fit's own to go on from, the fit's for the calibration's posterior),
+    :func:`_line_scoring` steps first, the trust region going on from where it stops short."""
     def stop_when_converged(intermediate_result: OptimizeResult) -> None:
         if converged(objective, intermediate_result.x, tol, body):
             raise StopIteration
@@ -323,10 +323,11 @@ def _line_scoring(objective: WhittleObjective, theta: np.ndarray, value: float, 
     small share of an urban window's power and swing within their wide std, the scoring step
     taking a floor towards zero by tens in its log. A trust region spends its radius on that
     log, and the body crawls with it (7-8 iterations a window, measured). Here a floor falls
-    as far as its step says (ℓ is flat below a floor's share of 1e-6: the step's size there
-    costs nothing), rises by at most :data:`_FLOOR_RISE` (ℓ's curvature in the log changes
-    sign as the floor overtakes the signal), and the other parameters take the step that is
-    best given the floors' (the quadratic model minimised with those held)."""
+    as far as its step says, up to :data:`_FLOOR_FALL` (ℓ is flat below a floor's share of
+    1e-6: the step's size there costs nothing), rises by at most :data:`_FLOOR_RISE` (ℓ's
+    curvature in the log changes sign as the floor overtakes the signal), and the other
+    parameters take the step that is best given the floors' (the quadratic model minimised
+    with those held)."""
     noise = np.arange(theta.size)[objective.model.noise_slice]
     steps = 0
     while steps < max_iter and not converged(objective, theta, tol, body):
