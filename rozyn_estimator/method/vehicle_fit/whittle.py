@@ -301,10 +301,10 @@ def scoring(objective: WhittleObjective, theta0: np.ndarray, tol: float, max_ite
     value = objective.fun(theta0)
     if not np.isfinite(value):
         return OptimizeResult(x=theta0, fun=math.inf, nit=0)
-    walked = 0
+    walked, done = 0, False
     if near:
-        theta0, value, walked = _line_scoring(objective, theta0, value, tol, max_iter, body)
-    done = converged(objective, theta0, tol, body)
+        theta0, value, walked, done = _line_scoring(objective, theta0, value, tol, max_iter, body)
+    done = done or converged(objective, theta0, tol, body)
     if done or walked >= max_iter:
         return OptimizeResult(x=theta0, fun=value, nit=walked, success=done)
     res = minimize(objective.fun, theta0, jac=objective.jac, hess=objective.hess, method="trust-exact",
@@ -314,9 +314,9 @@ def scoring(objective: WhittleObjective, theta0: np.ndarray, tol: float, max_ite
 
 
 def _line_scoring(objective: WhittleObjective, theta: np.ndarray, value: float, tol: float,
-                  max_iter: int, body: int) -> tuple[np.ndarray, float, int]:
-    """(θ, ℓ, steps) of scoring steps with a backtracking line search, until :func:`converged`
-    or a step finds no descent.
+                  max_iter: int, body: int) -> tuple[np.ndarray, float, int, bool]:
+    """(θ, ℓ, steps, whether :func:`converged`) of scoring steps with a backtracking line search,
+    until converged or a step finds no descent.
 
     A start from the last window's optimum is within a step or two of the body's (the Fisher
     information models ℓ well there), but a noise floor's log may not be: the floors are a
@@ -330,7 +330,9 @@ def _line_scoring(objective: WhittleObjective, theta: np.ndarray, value: float, 
     with those held)."""
     noise = np.arange(theta.size)[objective.model.noise_slice]
     steps = 0
-    while steps < max_iter and not converged(objective, theta, tol, body):
+    while steps < max_iter:
+        if converged(objective, theta, tol, body):
+            return theta, value, steps, True
         grad, newton = newton_step(objective, theta)
         step, hess = -newton, objective.hess(theta)
         held = noise[(step[noise] > _FLOOR_RISE) | (step[noise] < -_FLOOR_FALL)]
@@ -346,7 +348,7 @@ def _line_scoring(objective: WhittleObjective, theta: np.ndarray, value: float, 
                 break
         else:
             break
-    return theta, value, steps
+    return theta, value, steps, False
 
 
 def converged(objective: WhittleObjective, theta: np.ndarray, tol: float, body: int = 0) -> bool:
