@@ -266,3 +266,62 @@ def test_a_change_found_over_a_later_stop_restarts_after_that_stop():
     assert len(fusion.changes) == 1
     assert fusion.changes[0].text().startswith("load changed at one of the stops from t = 400.0 s to 450.0 s")
     np.testing.assert_allclose(published[-1].params, loaded)  # the windows after the second stop only
+
+
+def _found_over_two_stops(fusion: Fusion) -> tuple[list[Estimate], int]:
+    """The load put in at the second of two stops (400 s, 450 s): the updates published, and the
+    index of the one that found the change (a window after the first stop, holding both loads)."""
+    empty, loaded = [1000.0, 2000.0, 1.2], [1150.0, 2047.0, 1.278]
+    stops = [(int(400 * S), int(410 * S)), (int(450 * S), int(460 * S))]
+    published, found = [], -1
+    for lo, hi in _windows(0.0, 14):
+        params = loaded if lo >= stops[1][1] else empty if hi <= stops[1][0] else np.add(empty, loaded) / 2
+        published.append(fusion.add(_estimate(params), lo, hi, [s for s in stops if lo < s[0] < hi]))
+        found = len(published) - 1 if fusion.changes and found < 0 else found
+    return published, found
+
+
+def test_a_change_found_over_later_stops_carries_its_step_as_uncertainty():
+    """The window that found a change at one of several stops may hold both loads (here half and
+    half): published, its std holds the step it found, which reaches the new load; a change at
+    the one stop a window lies after is the new load's alone and keeps the window's std."""
+    published, found = _found_over_two_stops(Fusion())
+    mixed = published[found]
+    assert abs(mixed.params[0] - 1075.0) < 1e-9
+    assert 1150.0 - mixed.params[0] < 1.0 * np.sqrt(mixed.covariance[0, 0])  # the new load within 1 std
+    assert np.sqrt(mixed.covariance[0, 0]) < 80.0  # the step's 75 kg and the window's 10 kg
+    single = Fusion()
+    stop = (int(400 * S), int(410 * S))
+    for lo, hi in _windows(0.0, 14):
+        est = single.add(_estimate([1150.0, 2047.0, 1.278] if lo >= stop[1] else [1000.0, 2000.0, 1.2]),
+                         lo, hi, [stop] if lo < stop[0] < hi else [])
+        if single.changes:
+            break
+    np.testing.assert_allclose(np.sqrt(np.diag(est.covariance)), STD)
+
+
+def test_after_a_change_windows_are_cut_to_it_and_a_short_one_holds_the_estimate_since():
+    """A window reaching back over the last change would read both loads: it is cut to the change
+    (:meth:`Fusion.restart_cut`); cut, it may hold too little driving to estimate, and then the
+    estimate that found the change stands, marked held."""
+    from rozyn_estimator.online.fusion import fuse_update
+    from rozyn_estimator.online.records import OK, Update
+
+    def job(start_s: float) -> Job:  # 200 s of driving from start_s
+        stamps = ((start_s + np.arange(0, 200.0, 0.1)) * NS).astype(np.int64)
+        return Job(stamps[-1], ((stamps, np.zeros(stamps.size)),) * 2, (stamps, np.full(stamps.size, 10.0)))
+
+    fusion = Fusion()
+    assert fusion.restart_cut(job(0.0)) is None  # no change found: the window as it is
+    _found_over_two_stops(fusion)
+    assert fusion._restart_ns == 460 * S - 1
+    late = job(400.0)
+    assert fusion.restart_cut(late) == 460 * S
+    assert trimmed(late, 460 * S).samples[0][0][0] == 460 * S
+    assert fusion.restart_cut(job(500.0)) is None  # wholly after it
+    short = Update(int(600 * S), OK, "window 50 % full (need 80 % of 120 s of driving)")
+    held, change = fuse_update(fusion, short, trimmed(late, 460 * S), 2.0, 2.8, since_change=True)
+    assert change is None and held.held and held.published
+    np.testing.assert_allclose(held.params, fusion.fused.params)
+    assert "since the load change, window 50 % full" in held.message
+    assert fuse_update(fusion, short, late, 2.0, 2.8)[0].estimate is None  # not cut: nothing to hold

@@ -74,7 +74,8 @@ GROUPS = {
     "wheelbase": "wheelbase", "sensor_front_offset": "sensor positions",
     "sensor_rear_offset": "sensor positions", "sensor_gain": "sensor gains",
     "sensor_time_offset": "sensor timing", "cog_height": "heights", "wheel_centre_height": "heights",
-    "drive_model": "varying drive's model", "track": "tracks", "anti_roll": "anti-roll bars",
+    "drive_model": "varying drive's model", "load_change": "load change", "track": "tracks",
+    "anti_roll": "anti-roll bars",
     "sensor_lateral": "sensor positions", "gyro_misalignment": "gyro turns",
 }
 

@@ -366,7 +366,9 @@ class OnlineEstimator:
             settings = (self._config, self._vehicle, self._pipeline, self._warm if current else None)
             cfg = self._config
             cut = self._fusion.test_cut(job, cfg.min_window_fill * cfg.window_s, cfg.driving_speed_mps)
-        job = job if cut is None or not current else trimmed(job, cut)  # wholly after a stop: its test
+            since = self._fusion.restart_cut(job) if cut is None else None
+        start = cut if cut is not None else since  # after a stop: its test; after a change: the new load
+        job = trimmed(job, start) if current and start is not None else job
         try:
             update = compute_update(job, self.names, *settings, self._layout)
         except Exception as exc:  # the one guard: node and replay both compute here
@@ -378,7 +380,8 @@ class OnlineEstimator:
                 if update.published and not update.held:
                     self._warm = update.estimate  # the next window's refinement starts here (its own)
                 update, change = fuse_update(self._fusion, update, job, self._config.driving_speed_mps,
-                                             self._vehicle.wheelbase_m, probe=cut is not None)
+                                             self._vehicle.wheelbase_m, probe=cut is not None,
+                                             since_change=since is not None)
                 if change:
                     self._events.append((OK, change))
                 self._last_update = update

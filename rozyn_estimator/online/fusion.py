@@ -22,11 +22,15 @@ that begins as the vehicle pulls away reads the body a little less well: fused, 
 took the half hour's I_yy from -0.5 to -0.9 %). At ``p <`` :data:`CHANGE_P` the load changed
 at that stop — or, where the window holds later stops (in town it usually does), at one of
 them: the window reads the old load up to the one where it changed. The fusion restarts from
-the windows after the last stop the window holds (a window still reaching back over it
-publishes the estimate since it), the event is reported (``load changed at the stop at t = …:
-m 1000 → 1150 kg``, or ``at one of the stops from t = … to …``) and counted. Until that window
-arrives the windows reaching over the stop are fused as any other (they hold both loads, which
-only the test can tell).
+the driving after the last stop the window holds, the event is reported (``load changed at the
+stop at t = …: m 1000 → 1150 kg``, or ``at one of the stops from t = … to …``) and counted.
+The windows after it are cut to that driving (:meth:`Fusion.restart_cut`: a window reaching
+back over the change would read both loads); while a cut one holds too little driving to
+estimate, the window that found the change stands, marked held. Where that window held later
+stops it may hold both loads, and the new load lies beyond it: its covariance then holds the
+step it found (``load_change`` in the budget; an urban drive's +150 kg: ±150 kg on the mass
+until 96 s of driving after the last stop). Until the test the windows reaching over the stop
+are fused as any other (they hold both loads, which only the test can tell).
 
 What fusing cannot reduce: a varying drive's model (the mixture of local spectra,
 :mod:`~rozyn_estimator.method.likelihood.road_input`) is an approximation, which on urban windows
@@ -141,6 +145,7 @@ class Fusion:
         self._stops: dict[int, int] = {}  # stop start -> end [ns], not yet tested
         self._tested: set[int] = set()  # the starts of the stops tested (later windows see them too)
         self._restart_ns = -1  # windows must begin after this to be fused
+        self._spread: np.ndarray | None = None  # (k,) the last change's step where it may be mixed
         self._fused: Estimate | None = None
         self._windows = 0
 
@@ -174,8 +179,8 @@ class Fusion:
         if lo_ns <= self._restart_ns:  # it holds data from before the last change
             if self._chains and self._fused is not None:
                 return self._fused  # the estimate since the change stands
-            self._fused, self._windows = est, 1
-            return est
+            self._fused, self._windows = _widened(est, self._spread), 1
+            return self._fused
         before = self._best(lo_ns)
         own = Chain(lo_ns, hi_ns, info, info @ est.params, 1, int(unsteady), int(_calibrated(est)))
         chain = own if before is None else Chain(
@@ -198,6 +203,15 @@ class Fusion:
                     driving_time_s(job.speed, end, job.due_ns, driving_mps) >= min_driving_s:
                 return end
         return None
+
+    def restart_cut(self, job: Job) -> int | None:
+        """Where to start ``job``'s window so that it holds only the driving since the last load
+        change found (None: it does, or none was found): a window reaching back over the change
+        would read both loads."""
+        lo = first_stamp_ns(job)
+        if self._restart_ns < 0 or lo is None or lo > self._restart_ns:
+            return None
+        return self._restart_ns + 1
 
     def _register(self, stops: list[tuple[int, int]]) -> None:
         for start, end in stops:
@@ -236,9 +250,24 @@ class Fusion:
                 last, end = inside[-1] if inside else (start, end)
                 self.changes.append(LoadChange(start, float(before.mean[0]), float(est.params[0]), p, last))
                 self._tested.update(s for s, _ in inside)
+                self._spread = d if last != start else None
                 self._restart_ns = end - 1
                 self._chains = []
                 self._stops = {s: e for s, e in self._stops.items() if s > last}
+
+
+def _widened(est: Estimate, spread: np.ndarray | None) -> Estimate:
+    """``est`` with the step ``spread`` (k,) as a systematic part (``load_change`` in the budget):
+    a window that found a change at one of several stops may hold both loads, and then the new
+    load's value lies beyond the window's (by the step itself where half the window is the old
+    load's)."""
+    if spread is None:
+        return est
+    if est.budget is None:
+        return dataclasses.replace(est, covariance=est.covariance + np.outer(spread, spread))
+    contributions = {**est.budget.contributions, "load_change": spread}
+    budget = dataclasses.replace(est.budget, contributions=contributions)
+    return dataclasses.replace(est, covariance=budget.total, budget=budget)
 
 
 def _calibrated(est: Estimate) -> bool:
@@ -300,12 +329,18 @@ def _stop_and_go(speed: tuple[np.ndarray, np.ndarray], wheelbase_m: float) -> bo
 
 
 def fuse_update(fusion: Fusion, update: Update, job: Job, driving_mps: float, wheelbase_m: float,
-                probe: bool = False) -> tuple[Update, str | None]:
+                probe: bool = False, since_change: bool = False) -> tuple[Update, str | None]:
     """(the update to publish, the text of a load change it found or None): a published window's
-    estimate fused; a held one's the last fused estimate."""
+    estimate fused; a held one's the last fused estimate; a window cut to the last load change
+    (``since_change``) that holds too little driving yet holds the estimate since the change."""
     if update.held and fusion.fused is not None:
         return dataclasses.replace(update, estimate=fusion.fused, fused_windows=fusion.windows,
                                    load_changes=len(fusion.changes)), None
+    if since_change and update.estimate is None and fusion.fused is not None:
+        return dataclasses.replace(update, estimate=fusion.fused, held=True, fused_windows=fusion.windows,
+                                   load_changes=len(fusion.changes),
+                                   message=f"held: since the load change, {update.message}; the estimate "
+                                           "that found it stands"), None
     if not update.published or update.estimate is None:
         return update, None
     lo = first_stamp_ns(job)
