@@ -27,10 +27,11 @@ stop at t = …: m 1000 → 1150 kg``, or ``at one of the stops from t = … to 
 The windows after it are cut to that driving (:meth:`Fusion.restart_cut`: a window reaching
 back over the change would read both loads); while a cut one holds too little driving to
 estimate, the window that found the change stands, marked held. Where that window held later
-stops it may hold both loads, and the new load lies beyond it: its covariance then holds the
-step it found (``load_change`` in the budget; an urban drive's +150 kg: ±150 kg on the mass
-until 96 s of driving after the last stop). Until the test the windows reaching over the stop
-are fused as any other (they hold both loads, which only the test can tell).
+stops it may hold both loads, and the new load then lies beyond it: its covariance holds how
+far, were the change at the last stop (``load_change`` in the budget, :func:`_mixed_spread`;
+an urban drive's +150 kg: the mass ±400-650 kg until 96 s of driving after the last stop).
+Until the test the windows reaching over the stop are fused as any other (they hold both
+loads, which only the test can tell).
 
 What fusing cannot reduce: a varying drive's model (the mixture of local spectra,
 :mod:`~rozyn_estimator.method.likelihood.road_input`) is an approximation, which on urban windows
@@ -70,6 +71,10 @@ MIN_STOP_S = 5.0  # a stop this long may change the load
 # the test's level per stop: an urban half hour has about 20 tests, and the windows' tails are
 # heavier than a χ²'s (at 1e-4, 2 of 20 urban drives found a change where there was none)
 CHANGE_P = 1e-6
+# the least share of a window's driving after its last stop taken for the new load's: a change
+# found in a smaller share would be more than four times the step found (a load of 600 kg where
+# it found 150); a share of 5 % published the mass ±4400 kg
+_LEAST_SHARE = 0.25
 MAX_CHAINS = 512  # chains kept since the last change (each an update's; the oldest go first)
 DRIVE_MODEL_FLOOR = 0.003  # the varying drive's model: share of each value
 # the CoG's longitudinal position, where its own share is smaller (module docstring)
@@ -173,7 +178,7 @@ class Fusion:
         except np.linalg.LinAlgError:
             return est
         found = len(self.changes)
-        self._test_stops(est, stat, lo_ns)
+        self._test_stops(est, stat, lo_ns, hi_ns)
         if probe and len(self.changes) == found and self._fused is not None:
             return self._fused  # the load stays: the fused windows stand (a probe starts at pulling away)
         if lo_ns <= self._restart_ns:  # it holds data from before the last change
@@ -223,7 +228,7 @@ class Fusion:
         done = [c for c in self._chains if c.hi_ns <= before_ns]
         return max(done, key=lambda c: (c.windows, c.hi_ns)) if done else None
 
-    def _test_stops(self, est: Estimate, stat: np.ndarray, lo_ns: int) -> None:
+    def _test_stops(self, est: Estimate, stat: np.ndarray, lo_ns: int, hi_ns: int) -> None:
         """Test each stop this window lies wholly after; restart where the load changed."""
         for start in sorted(s for s, end in self._stops.items() if end <= lo_ns):
             if start not in self._stops:  # in a window that found a change (below)
@@ -250,17 +255,25 @@ class Fusion:
                 last, end = inside[-1] if inside else (start, end)
                 self.changes.append(LoadChange(start, float(before.mean[0]), float(est.params[0]), p, last))
                 self._tested.update(s for s, _ in inside)
-                self._spread = d if last != start else None
+                self._spread = _mixed_spread(d, lo_ns, hi_ns, inside) if last != start else None
                 self._restart_ns = end - 1
                 self._chains = []
                 self._stops = {s: e for s, e in self._stops.items() if s > last}
 
 
+def _mixed_spread(step: np.ndarray, lo_ns: int, hi_ns: int, inside: list[tuple[int, int]]) -> np.ndarray:
+    """(k,) how far beyond a window ``[lo_ns, hi_ns]`` that found the change ``step`` the new load's
+    values may lie when the load changed at the last of the stops ``inside`` it: the window then
+    reads the new load in the share ``f`` of its driving after that stop, and as a mixture its
+    step is ``f`` of the whole, which lies ``step (1/f - 1)`` beyond it."""
+    driving = (hi_ns - lo_ns) - sum(end - start for start, end in inside)
+    share = (hi_ns - inside[-1][1]) / driving if driving > 0 else 0.0
+    return step * (1.0 / max(share, _LEAST_SHARE) - 1.0)
+
+
 def _widened(est: Estimate, spread: np.ndarray | None) -> Estimate:
-    """``est`` with the step ``spread`` (k,) as a systematic part (``load_change`` in the budget):
-    a window that found a change at one of several stops may hold both loads, and then the new
-    load's value lies beyond the window's (by the step itself where half the window is the old
-    load's)."""
+    """``est`` with ``spread`` (k,) as a systematic part (``load_change`` in the budget): a window
+    that found a change at one of several stops may hold both loads (:func:`_mixed_spread`)."""
     if spread is None:
         return est
     if est.budget is None:
