@@ -346,14 +346,12 @@ def fuse_update(fusion: Fusion, update: Update, job: Job, driving_mps: float, wh
     """(the update to publish, the text of a load change it found or None): a published window's
     estimate fused; a held one's the last fused estimate; a window cut to the last load change
     (``since_change``) that holds too little driving yet holds the estimate since the change."""
-    if update.held and fusion.fused is not None:
-        return dataclasses.replace(update, estimate=fusion.fused, fused_windows=fusion.windows,
-                                   load_changes=len(fusion.changes)), None
-    if since_change and update.estimate is None and fusion.fused is not None:
-        return dataclasses.replace(update, estimate=fusion.fused, held=True, fused_windows=fusion.windows,
-                                   load_changes=len(fusion.changes),
-                                   message=f"held: since the load change, {update.message}; the estimate "
-                                           "that found it stands"), None
+    short = since_change and update.estimate is None  # cut to the change, too little driving
+    if (update.held or short) and fusion.fused is not None:
+        message = f"held: since the load change, {update.message}; the estimate that found it stands" \
+            if short else update.message
+        return dataclasses.replace(update, estimate=fusion.fused, held=True, message=message,
+                                   fused_windows=fusion.windows, load_changes=len(fusion.changes)), None
     if not update.published or update.estimate is None:
         return update, None
     lo = first_stamp_ns(job)

@@ -301,10 +301,10 @@ def scoring(objective: WhittleObjective, theta0: np.ndarray, tol: float, max_ite
     value = objective.fun(theta0)
     if not np.isfinite(value):
         return OptimizeResult(x=theta0, fun=math.inf, nit=0)
-    walked, done = 0, False
-    if near:
+    if near:  # it says whether θ converged: no second test
         theta0, value, walked, done = _line_scoring(objective, theta0, value, tol, max_iter, body)
-    done = done or converged(objective, theta0, tol, body)
+    else:
+        walked, done = 0, converged(objective, theta0, tol, body)
     if done or walked >= max_iter:
         return OptimizeResult(x=theta0, fun=value, nit=walked, success=done)
     res = minimize(objective.fun, theta0, jac=objective.jac, hess=objective.hess, method="trust-exact",
@@ -347,8 +347,8 @@ def _line_scoring(objective: WhittleObjective, theta: np.ndarray, value: float, 
                 theta, value, steps = theta + t * step, trial, steps + 1
                 break
         else:
-            break
-    return theta, value, steps, False
+            return theta, value, steps, False  # tested above, at this θ
+    return theta, value, steps, converged(objective, theta, tol, body)
 
 
 def converged(objective: WhittleObjective, theta: np.ndarray, tol: float, body: int = 0) -> bool:
