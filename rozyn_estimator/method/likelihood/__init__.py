@@ -8,7 +8,9 @@ car) stands on, ROS-free:
 - ``score``: the score's lag covariances and the sandwich's ratio a warm update keeps;
 - ``whiteness`` and ``fitcheck``: the model check's statistic and verdicts;
 - ``speedcheck``: the speed topic checked against the wheelbase delay the data show;
-- ``guards``: a noise floor run aground revived, a step backtracked.
+- ``guards``: a noise floor run aground revived, a step backtracked;
+- ``kept``: the last few results of a costly function of a window's arrays (its drive, its
+  mixture of delays, the grid's maps), found again by their arguments' values.
 """
 
 from rozyn_estimator.method.likelihood.config import LikelihoodConfig

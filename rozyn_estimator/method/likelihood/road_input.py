@@ -6,13 +6,11 @@ from __future__ import annotations
 
 import copy
 import functools
-import hashlib
-import threading
-from collections import OrderedDict
 
 import numpy as np
 from scipy import special
 
+from rozyn_estimator.method.likelihood.kept import Kept
 from rozyn_estimator.method.likelihood.spectra import taper_window
 
 
@@ -69,8 +67,7 @@ def delay_bins(wheelbase_m: float, speed_mps: np.ndarray,
     bin (-1: not :func:`steady_driving`)) of a varying drive's samples: :data:`DELAY_BINS`
     equal bins over the driven samples' delays (:func:`travel_delays`; ``L/v`` without ``fs_hz``)."""
     v = np.atleast_1d(np.asarray(speed_mps, dtype=float))
-    tau = travel_delays(wheelbase_m, v, fs_hz) if fs_hz > 0 else wheelbase_m / np.maximum(v, DRIVING_MPS)
-    moving = steady_driving(wheelbase_m, v, fs_hz, tau)
+    tau, moving = _drive_profile(wheelbase_m, v, fs_hz)
     bins = np.full(v.size, -1)
     if not np.any(moving):
         return np.zeros(0), bins
@@ -113,20 +110,30 @@ model of a delayed copy does not hold; measured, a window with one stop read I_y
 (mean z -2.1 over 8 roads) with 10 % and no bias with 3 %, the data of such samples masked."""
 
 
-def steady_driving(wheelbase_m: float, speed_mps: np.ndarray, fs_hz: float,
-                   tau: np.ndarray | None = None) -> np.ndarray:
+def steady_driving(wheelbase_m: float, speed_mps: np.ndarray, fs_hz: float) -> np.ndarray:
     """Which samples of a varying drive the model holds: driving (:data:`DRIVING_MPS`), with a
     wheelbase delay of at most ``L / DRIVING_MPS`` and the rear wheel at nearly the front's speed
-    (:data:`STRETCH`). The refinement masks the others' data (they hold the model's road nowhere)."""
-    v = np.asarray(speed_mps, dtype=float)
-    if tau is None:
-        tau = travel_delays(wheelbase_m, v, fs_hz) if fs_hz > 0 else wheelbase_m / np.maximum(v, DRIVING_MPS)
+    (:data:`STRETCH`). The refinement masks the others' data (they hold the model's road nowhere).
+    Read-only (kept for the window's other uses)."""
+    return _drive_profile(wheelbase_m, np.asarray(speed_mps, dtype=float), fs_hz)[1]
+
+
+def _drive_profile(wheelbase_m: float, v: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """(each sample's wheelbase delay [s], :func:`steady_driving`'s mask), read-only, the last few
+    kept: a window's update asks for them about five times (its data's gates, the model's weights,
+    its delay bins, its stretches, the model check), each about a third of a millisecond."""
+    return _PROFILES.get((v, wheelbase_m, fs_hz), lambda: _profile(wheelbase_m, v, fs_hz))
+
+
+def _profile(wheelbase_m: float, v: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    tau = travel_delays(wheelbase_m, v, fs_hz) if fs_hz > 0 else wheelbase_m / np.maximum(v, DRIVING_MPS)
     keep = (v >= DRIVING_MPS) & (tau <= wheelbase_m / DRIVING_MPS)  # a delay this long: a crawl
     if fs_hz > 0:
         t = np.arange(v.size) / fs_hz
         v_front = np.interp(t - tau, t, v)
         keep &= np.abs(v / np.maximum(v_front, 1e-9) - 1.0) <= STRETCH
-    return keep
+    tau.flags.writeable = keep.flags.writeable = False
+    return tau, keep
 
 
 def steady_window(accel: np.ndarray, wheelbase_m: float, speed_mps: float | np.ndarray,
@@ -210,29 +217,17 @@ def road_mixture(omega: np.ndarray, wheelbase_m: float, speed_mps: np.ndarray,
     return mix.share, mix.phi
 
 
-_MIXTURES: OrderedDict[bytes, TrackMixture] = OrderedDict()
-_MIXTURES_KEPT = 4  # a window's model and its variants (the budget's, the calibration's) share one
-_MIXTURES_LOCK = threading.Lock()
+_MIXTURES = Kept(4)  # a window's model and its variants (the budget's, the calibration's) share one
+_PROFILES = Kept(4)
 
 
 def track_mixture(omega: np.ndarray, wheelbase_m: float, track_m: float, speed_mps: np.ndarray,
                   sample_weights: np.ndarray | None, max_cpm: float, fs_hz: float) -> TrackMixture:
     """:class:`TrackMixture` of these arguments, the last few kept: a window's model is built
     again for its variants with the same speeds, and each build costs about one update's tenth."""
-    digest = hashlib.blake2b(digest_size=16)
-    for part in (omega, speed_mps, sample_weights, (wheelbase_m, track_m, max_cpm, fs_hz)):
-        digest.update(b"-" if part is None else np.ascontiguousarray(part, dtype=float).tobytes())
-    key = digest.digest()
-    with _MIXTURES_LOCK:  # updates may run on several threads (the node's, a replay's)
-        if key in _MIXTURES:
-            _MIXTURES.move_to_end(key)
-            return _MIXTURES[key]
-    mix = TrackMixture(omega, wheelbase_m, track_m, speed_mps, sample_weights, max_cpm, fs_hz)
-    with _MIXTURES_LOCK:
-        _MIXTURES[key] = mix
-        while len(_MIXTURES) > _MIXTURES_KEPT:
-            _MIXTURES.popitem(last=False)
-    return mix
+    args = (np.asarray(omega), np.asarray(speed_mps), sample_weights, wheelbase_m, track_m, max_cpm, fs_hz)
+    return _MIXTURES.get(args, lambda: TrackMixture(omega, wheelbase_m, track_m, speed_mps, sample_weights,
+                                                   max_cpm, fs_hz))
 
 
 class TrackMixture:

@@ -24,6 +24,8 @@ from collections.abc import Callable
 import numpy as np
 from scipy import sparse
 
+from rozyn_estimator.method.likelihood.kept import Kept
+
 ALIAS_SPACING_HZ = 0.2  # the aliases' nodes, when the band's are on a grid (every 4th of the default's)
 Linear = Callable[[np.ndarray], np.ndarray]  # stacked (..., F, k, k) -> (..., nodes, k, k)
 
@@ -120,7 +122,16 @@ def map_bins(op: sparse.csr_array, m: np.ndarray) -> np.ndarray:
 
 def lagrange_matrix(x: np.ndarray, n_nodes: int) -> sparse.csr_array:
     """(x.size, n_nodes) the interpolation from equally spaced nodes to the positions ``x``
-    (in node spacings; :func:`lagrange_weights`) as a sparse matrix."""
+    (in node spacings; :func:`lagrange_weights`) as a sparse matrix, shared (read only): the
+    windows of a drive ask for the same few, each about half a millisecond."""
+    x = np.asarray(x, dtype=float)
+    return _LAGRANGE.get((x, n_nodes), lambda: _lagrange_matrix(x, n_nodes))
+
+
+_LAGRANGE = Kept(8)  # a window's: its fit's map, its aliases', S itself at the sampled frequencies, ...
+
+
+def _lagrange_matrix(x: np.ndarray, n_nodes: int) -> sparse.csr_array:
     first, weights = lagrange_weights(x, n_nodes)
     cols = first[:, None] + np.arange(weights.shape[1])
     return sparse.csr_array((weights.ravel(), cols.ravel(), np.arange(0, weights.size + 1, weights.shape[1])),

@@ -16,7 +16,7 @@ import numpy as np
 from scipy.optimize import OptimizeResult, minimize
 
 from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
-from rozyn_estimator.method.vehicle_fit.stacks import herm, mul
+from rozyn_estimator.method.vehicle_fit.stacks import herm, inverse_cholesky, mul
 
 _HESSIAN_STEP = 3  # the optimiser's Fisher information: every 3rd frequency (class docstring)
 _HESSIAN_MIN = 300  # ... of models with at least this many frequencies
@@ -26,6 +26,7 @@ _NUISANCE_DECREMENT = 0.1
 _FLOOR_RISE = 2.0  # a line-search step raises a noise floor's log by at most this (_line_scoring)
 _FLOOR_FALL = 30.0  # ... and lowers it by at most this (a floor e^-30 of where it was is at zero)
 _BACKTRACKS = (1.0, 0.3, 0.09, 0.027)  # the step lengths a line search tries
+_PENDING = np.zeros((0, 0, 0, 0), dtype=complex)  # dS at the nodes not computed yet (WhittleObjective.fun)
 
 
 class WhittleObjective:
@@ -68,12 +69,14 @@ class WhittleObjective:
         self._hessian: np.ndarray | None = None
         self._sampled_rows: np.ndarray | None = None
         self._S_nodes: np.ndarray | None = None  # S at the model's nodes at the last evaluation
+        self._theta = np.zeros(model.n_params)  # ... its θ
+        self._inv: np.ndarray | None = None  # ... and S⁻¹ at the frequencies
+        self._gradient_due = False  # ... ℓ alone so far (:meth:`fun`)
         self._kernels: tuple[tuple[bytes, bytes], np.ndarray] | None = None  # (θ, combos), score_kernels
-        self.evaluations = 0
 
     def nll(self, S: np.ndarray) -> float:
         """ℓ for a model spectrum ``S`` (inf where it is not positive definite)."""
-        factor = _inverse_cholesky(S)
+        factor = inverse_cholesky(S)
         return math.inf if factor is None else self._nll(factor)
 
     def _nll(self, linv: np.ndarray, inv: np.ndarray | None = None) -> float:
@@ -88,12 +91,25 @@ class WhittleObjective:
     def evaluate(self, theta: np.ndarray) -> tuple[float, np.ndarray]:
         """(ℓ, ∇ℓ) at θ; ℓ = inf where S is not positive definite."""
         key = np.asarray(theta, dtype=float).tobytes()
-        if key == self._key:
-            return self._value
-        self.evaluations += 1
-        S_nodes, dS = self.model.node_spectrum(theta)
-        assert dS is not None
-        return self._store(key, np.asarray(theta, dtype=float), S_nodes, dS)
+        if key != self._key:
+            S_nodes, dS = self.model.node_spectrum(theta)
+            assert dS is not None
+            return self._store(key, np.asarray(theta, dtype=float), S_nodes, dS)
+        if self._gradient_due:
+            _, dS = self.model.node_spectrum(theta)
+            assert dS is not None
+            self._complete(dS)
+        return self._value
+
+    def fun(self, theta: np.ndarray) -> float:
+        """ℓ at θ. Its gradient and the derivatives of S wait until asked for (:meth:`evaluate`):
+        a line search's rejected trial and a floor's probe need none, and they are two thirds of
+        an evaluation's work."""
+        key = np.asarray(theta, dtype=float).tobytes()
+        if key != self._key:
+            S_nodes, _ = self.model.node_spectrum(theta, derivatives=False)
+            self._store(key, np.asarray(theta, dtype=float), S_nodes, None)
+        return self._value[0]
 
     def seed(self, theta: np.ndarray, S_nodes: np.ndarray, dS_nodes: np.ndarray) -> None:
         """Take S and dS/dθ at θ's nodes as given (an evaluation of an equal model: the
@@ -108,19 +124,33 @@ class WhittleObjective:
         return self._S_nodes, self._state[1]
 
     def _store(self, key: bytes, theta: np.ndarray, S_nodes: np.ndarray,
-               dS: np.ndarray) -> tuple[float, np.ndarray]:
+               dS: np.ndarray | None) -> tuple[float, np.ndarray]:
+        """ℓ at θ from S at the nodes, and ∇ℓ from ``dS`` (None: when :meth:`evaluate` asks)."""
         S = self.model.to_targets(S_nodes)
-        linv = _inverse_cholesky(S)
+        linv = inverse_cholesky(S)
         self._key, self._dS, self._rows, self._hessian, self._sampled_rows = key, None, None, None, None
-        self._S_nodes = S_nodes
+        self._S_nodes, self._theta, self._gradient_due = S_nodes, theta, False
         if linv is None:
             self._state, self._value = None, (math.inf, np.zeros(self.model.n_params))
             return self._value
-        inv = mul(herm(linv), linv)
+        self._inv = inv = mul(herm(linv), linv)
+        value = self._nll(linv, inv) + 0.5 * float(self.precision @ theta**2)
+        self._state, self._value = (S, _PENDING, linv), (value, np.zeros(self.model.n_params))
+        if dS is None:
+            self._gradient_due = True
+            return self._value
+        return self._complete(dS)
+
+    def _complete(self, dS: np.ndarray) -> tuple[float, np.ndarray]:
+        """∇ℓ at the stored θ from its ``dS`` at the nodes."""
+        assert self._state is not None
+        S, _, linv = self._state
+        inv = self._inv
+        assert inv is not None
         W = self.model.to_nodes(self.counts[:, None, None] * (inv - mul(mul(inv, self.periodogram), inv)))
         grad = (dS.reshape(dS.shape[0], -1) @ W.swapaxes(1, 2).ravel()).real  # Σ_k tr(W ∂S)
-        value = self._nll(linv, inv) + 0.5 * float(self.precision @ theta**2)
-        self._state, self._value = (S, dS, linv), (value, grad + self.precision * theta)
+        self._state, self._gradient_due = (S, dS, linv), False
+        self._value = (self._value[0], grad + self.precision * self._theta)
         return self._value
 
     def whitened_periodogram(self, theta: np.ndarray) -> np.ndarray | None:
@@ -152,9 +182,6 @@ class WhittleObjective:
             change = (np.log(d) - delta[:, None] * b / d) @ self.counts
             change += 0.5 * self.precision[at] * (np.log(floors) ** 2 - theta[at] ** 2)
         return np.where(np.all(d > 0, axis=1) & np.isfinite(change), value + change, math.inf)
-
-    def fun(self, theta: np.ndarray) -> float:
-        return self.evaluate(theta)[0]
 
     def jac(self, theta: np.ndarray) -> np.ndarray:
         return self.evaluate(theta)[1]
@@ -380,24 +407,3 @@ def newton_step(objective: WhittleObjective, theta: np.ndarray) -> tuple[np.ndar
 def ridged(m: np.ndarray) -> np.ndarray:
     """``m`` plus a ridge of 1e-10 of its largest diagonal entry (flat directions stay still)."""
     return m + 1e-10 * np.max(np.abs(np.diag(m))) * np.eye(m.shape[0])
-
-
-def _inverse_cholesky(S: np.ndarray) -> np.ndarray | None:
-    """L⁻¹ of ``S = L Lᴴ`` per frequency; None unless every S is finite and positive definite.
-
-    L⁻¹ by forward substitution over L's few rows, each step one vectorised product over
-    the frequencies: numpy's batched solve against the identity took 3x as long (1.5 against
-    0.5 ms for 1741 2x2 matrices, 3.7 against 1.3 ms for 4x4), a fifth of an evaluation."""
-    if not np.all(np.isfinite(S)):
-        return None
-    try:
-        L = np.linalg.cholesky(S)
-    except np.linalg.LinAlgError:
-        return None
-    inv = np.zeros_like(L)
-    diagonal = 1.0 / np.einsum("kaa->ka", L)
-    for i in range(L.shape[-1]):
-        inv[:, i, i] = diagonal[:, i]
-        for j in range(i):
-            inv[:, i, j] = -np.einsum("km,km->k", L[:, i, j:i], inv[:, j:i, j]) * diagonal[:, i]
-    return inv
