@@ -71,7 +71,6 @@ class WhittleObjective:
         self._S_nodes: np.ndarray | None = None  # S at the model's nodes at the last evaluation
         self._theta = np.zeros(model.n_params)  # ... its θ
         self._inv: np.ndarray | None = None  # ... and S⁻¹ at the frequencies
-        self._gradient_due = False  # ... ℓ alone so far (:meth:`fun`)
         self._kernels: tuple[tuple[bytes, bytes], np.ndarray] | None = None  # (θ, combos), score_kernels
 
     def nll(self, S: np.ndarray) -> float:
@@ -95,7 +94,7 @@ class WhittleObjective:
             S_nodes, dS = self.model.node_spectrum(theta)
             assert dS is not None
             return self._store(key, np.asarray(theta, dtype=float), S_nodes, dS)
-        if self._gradient_due:
+        if self._state is not None and self._state[1] is _PENDING:  # ℓ alone so far (:meth:`fun`)
             _, dS = self.model.node_spectrum(theta)
             assert dS is not None
             self._complete(dS)
@@ -129,17 +128,14 @@ class WhittleObjective:
         S = self.model.to_targets(S_nodes)
         linv = inverse_cholesky(S)
         self._key, self._dS, self._rows, self._hessian, self._sampled_rows = key, None, None, None, None
-        self._S_nodes, self._theta, self._gradient_due = S_nodes, theta, False
+        self._S_nodes, self._theta = S_nodes, theta
         if linv is None:
             self._state, self._value = None, (math.inf, np.zeros(self.model.n_params))
             return self._value
         self._inv = inv = mul(herm(linv), linv)
         value = self._nll(linv, inv) + 0.5 * float(self.precision @ theta**2)
         self._state, self._value = (S, _PENDING, linv), (value, np.zeros(self.model.n_params))
-        if dS is None:
-            self._gradient_due = True
-            return self._value
-        return self._complete(dS)
+        return self._value if dS is None else self._complete(dS)
 
     def _complete(self, dS: np.ndarray) -> tuple[float, np.ndarray]:
         """∇ℓ at the stored θ from its ``dS`` at the nodes."""
@@ -149,7 +145,7 @@ class WhittleObjective:
         assert inv is not None
         W = self.model.to_nodes(self.counts[:, None, None] * (inv - mul(mul(inv, self.periodogram), inv)))
         grad = (dS.reshape(dS.shape[0], -1) @ W.swapaxes(1, 2).ravel()).real  # Σ_k tr(W ∂S)
-        self._state, self._gradient_due = (S, dS, linv), False
+        self._state = (S, dS, linv)
         self._value = (self._value[0], grad + self.precision * self._theta)
         return self._value
 
