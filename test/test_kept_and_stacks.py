@@ -1,6 +1,7 @@
 """What the refinement keeps between calls and the small-matrix kernels it runs on: a kept
 result is found by its arguments' values (never by an array that changed since), the
-vectorised Cholesky factor is LAPACK's, and ℓ alone at a trial point is ℓ with its gradient."""
+vectorised Cholesky factor is LAPACK's, the stacked product is matmul's, and ℓ alone at a
+trial point is ℓ with its gradient."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import pytest
 from rozyn_estimator.method.likelihood import road_input
 from rozyn_estimator.method.likelihood.kept import Kept
 from rozyn_estimator.method.vehicle_fit.spectrum import VehicleSpectrum
-from rozyn_estimator.method.vehicle_fit.stacks import inverse_cholesky
+from rozyn_estimator.method.vehicle_fit.stacks import inverse_cholesky, mul
 from rozyn_estimator.method.vehicle_fit.whittle import WhittleObjective
 from rozyn_estimator.vehicle import Vehicle
 
@@ -40,6 +41,22 @@ def test_a_windows_drive_profile_is_computed_once_and_read_only():
     other = v.copy()
     other[-500:] = 0.0  # a stop: another profile
     assert not np.array_equal(road_input.steady_driving(2.5, other, 100.0), first)
+
+
+
+@pytest.mark.parametrize(("left", "right"), [
+    ((7, 2, 2), (7, 2, 2)), ((7, 3, 3), (7, 3, 3)), ((3, 7, 2, 2), (1, 7, 2, 2)),  # element by element
+    ((2, 2), (7, 2, 2)), ((1, 7, 2, 2), (3, 1, 2, 2)), ((7, 2, 1), (7, 1, 2)), ((7, 3, 2), (7, 2, 3)),
+    ((7, 22, 2), (7, 2, 2)), ((7, 2, 2), (7, 2, 22)), ((7, 4, 4), (7, 4, 4)), ((7, 4, 8), (7, 8, 4)),
+])
+def test_the_stacked_product_is_matmuls_broadcast_as_it_is(left, right):
+    rng = np.random.default_rng(len(left) + left[-1] * right[-1])
+    a = rng.standard_normal(left) + 1j * rng.standard_normal(left)
+    b = rng.standard_normal(right)  # real times complex, as the sensing's real parts meet S
+    for x, y in ((a, b), (b.T.conj() if b.ndim == 2 else np.swapaxes(b, -1, -2), np.swapaxes(a, -1, -2))):
+        product = mul(x, y)
+        assert product.shape == np.matmul(x, y).shape and product.dtype == np.result_type(x, y)
+        np.testing.assert_allclose(product, x @ y, rtol=1e-12, atol=1e-12)
 
 
 @pytest.mark.parametrize("k", [2, 3, 4, 5])
