@@ -62,16 +62,26 @@ def test_a_mixture_sums_its_delays_exactly_and_is_built_once_per_drive():
     speed = np.abs(15.0 + np.cumsum(rng.normal(0.0, 0.05, 6000)))
     mix = track_mixture(omega, 2.8, 1.5, speed, None, 5.0, 100.0)
     direct = (mix.weights * np.exp(-1j * np.multiply.outer(omega, mix.tau))).sum(axis=1)
-    np.testing.assert_allclose(mix.phi, direct, rtol=0.0, atol=1e-12)  # Horner's sum, a histogram's bins
+    np.testing.assert_allclose(mix.phi, direct, rtol=0.0, atol=1e-12)  # the bins' phases by products
     np.testing.assert_allclose(mix.phase, np.exp(-1j * np.multiply.outer(omega, mix.tau)))
     assert track_mixture(omega, 2.8, 1.5, speed.copy(), None, 5.0, 100.0) is mix  # the model's variants
     assert track_mixture(omega, 2.8, 1.5, speed * 1.01, None, 5.0, 100.0) is not mix
     assert track_mixture(omega, 2.9, 1.5, speed, None, 5.0, 100.0) is not mix  # the budget's wheelbase
     groups = np.arange(mix.tau.size) // 16  # four stretches of the delays: their parts sum to the whole
-    parts = [mix.part(groups == g) for g in range(4)]
-    np.testing.assert_allclose(sum(p.share for p in parts), mix.share, rtol=1e-12)
-    np.testing.assert_allclose(sum(p.phi for p in parts), mix.phi, rtol=0.0, atol=1e-12)
-    np.testing.assert_allclose(sum(p.coherence(1.3)[0] for p in parts), mix.coherence(1.3)[0], atol=1e-12)
+    keep = groups[None, :] == np.arange(4)[:, None]
+    delay, coherence = mix.parts(keep, 1.3)
+    assert delay.shape == coherence.shape == (4, omega.size, 2, 2)
+    np.testing.assert_allclose(delay.sum(axis=0), mix_delay(mix), rtol=0.0, atol=1e-12)
+    np.testing.assert_allclose(coherence.sum(axis=0), mix.coherence(1.3)[0], atol=1e-12)
+    second = (mix.weights[:, keep[1]] * np.exp(-1j * np.multiply.outer(omega, mix.tau[keep[1]]))).sum(axis=1)
+    np.testing.assert_allclose(delay[1, :, 1, 0], second, rtol=0.0, atol=1e-12)  # a group's own bins alone
+    np.testing.assert_allclose(delay[1, :, 0, 0], mix.weights[:, keep[1]].sum(axis=1), rtol=1e-12)
+    assert mix.parts(keep)[1] is None  # the half car's one track: no coherence
+
+
+def mix_delay(mix) -> np.ndarray:
+    """The whole mixture's axles' delay ``[[W, φ̄], [φ, W]]`` (F, 2, 2)."""
+    return np.stack([mix.share, mix.phi.conj(), mix.phi, mix.share], axis=-1).reshape(-1, 2, 2)
 
 
 def test_steady_stretches_are_ramped_in_and_out():

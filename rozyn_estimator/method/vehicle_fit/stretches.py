@@ -85,14 +85,14 @@ def road_parts(objective: WhittleObjective, theta: np.ndarray, parts: np.ndarray
     _, H, _, _, _ = model.body_motion(theta)
     reads = mul(model.sensing_at(theta), H)
     weight = model.road_weight(theta)[:, None, None]
-    scale = float(np.exp(theta[model.index["ln_coherence_scale"]])) if model.rolls else 0.0
-    nodes = []
-    for keep in parts:
-        mix = model.mixture.part(keep)
-        delay = np.stack([mix.share, mix.phi.conj(), mix.phi, mix.share], axis=-1).reshape(-1, 2, 2)
-        inputs = weight * (model.road_inputs(mix.coherence(scale)[0], delay=delay) if model.rolls else delay)
-        nodes.append(model.fold(mul(mul(reads, inputs), herm(reads))))
-    at_nodes = np.stack(nodes)
+    scale = float(np.exp(theta[model.index["ln_coherence_scale"]])) if model.rolls else None
+    delay, coherence = model.mixture.parts(parts, scale)  # (G, F, 2, 2) each
+    if coherence is None:
+        inputs = delay
+    else:  # the wheels' (F, 4, 4), the groups stacked as frequencies
+        inputs = model.road_inputs(coherence.reshape(-1, 2, 2), delay=delay.reshape(-1, 2, 2))
+        inputs = inputs.reshape(*delay.shape[:2], 4, 4)
+    at_nodes = model.fold(mul(mul(reads, weight * inputs), herm(reads)))
     at = np.arange(model.freq_hz.size) if at is None else at
     if model.grid_hz <= 0:  # S at each frequency: the nodes are the targets, with one beyond each
         targets = at_nodes if at_nodes.shape[1] == model.freq_hz.size else at_nodes[:, 1:-1]  # end to smooth
