@@ -108,9 +108,9 @@ def pairs(A: np.ndarray, left: np.ndarray, right: np.ndarray, counts: np.ndarray
 
 
 def traced(X: np.ndarray, Y: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """(q,) ``Σ_k c_k Re tr(X_k Y_k)`` of stacked products ``X = A L``, ``Y = A R`` (q, K, k, k):
-    each product formed once serves every pair it is in."""
-    return np.einsum("qkab,qkba->qk", X, Y).real @ counts
+    """(..., q) ``Σ_k c_k Re tr(X_k Y_k)`` of stacked products ``X = A L``, ``Y = A R`` (..., q, K,
+    k, k), broadcast: each product formed once serves every pair it is in."""
+    return np.einsum("...kab,...kba->...k", X, Y).real @ counts
 
 
 def stretched_factors(objective: WhittleObjective, theta: np.ndarray, A: np.ndarray, total: np.ndarray,
@@ -132,11 +132,11 @@ def stretched_factors(objective: WhittleObjective, theta: np.ndarray, A: np.ndar
     # A N for a diagonal N scales A's columns; A Ŝ_g once per stretch, and their weighted sum
     # is A times the whole road part (the stretches sum to it)
     a_noise = A * np.diagonal(local_noise)[None, None, None, :]
-    a_local = [mul(A, r[None]) for r in local]
+    a_local = mul(A[None], local[:, None])  # (G, q, K, k, k)
     noise_pairs = traced(a_noise, a_noise, counts)
-    varied = sum(w * (kappa * traced(ar, ar, counts) + 2.0 * traced(ar, a_noise, counts) + noise_pairs)
-                 for w, ar in zip(stretches.fourth, a_local, strict=True))
-    a_road = sum(t * ar for t, ar in zip(stretches.time, a_local, strict=True))
+    each = kappa * traced(a_local, a_local, counts) + 2.0 * traced(a_local, a_noise, counts) + noise_pairs
+    varied = stretches.fourth @ each
+    a_road = np.tensordot(stretches.time, a_local, axes=1)
     a_all_noise = unmasked * a_noise
     steady = traced(a_road, a_road, counts) + 2.0 * traced(a_road, a_all_noise, counts) + \
         traced(a_all_noise, a_all_noise, counts)
