@@ -67,13 +67,7 @@ def delay_bins(wheelbase_m: float, speed_mps: np.ndarray,
     equal bins over the driven samples' delays (:func:`travel_delays`; ``L/v`` without ``fs_hz``).
     Read-only, the last few kept: the window's mixture and its stretches both ask."""
     v = np.atleast_1d(np.asarray(speed_mps, dtype=float))
-    return _BINS.get((v, wheelbase_m, fs_hz), lambda: _delay_bins(wheelbase_m, v, fs_hz))
-
-
-def _delay_bins(wheelbase_m: float, v: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
-    tau, bins = _binned(wheelbase_m, v, fs_hz)
-    tau.flags.writeable = bins.flags.writeable = False
-    return tau, bins
+    return _BINS.get((v, wheelbase_m, fs_hz), lambda: _read_only(_binned(wheelbase_m, v, fs_hz)))
 
 
 def _binned(wheelbase_m: float, v: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
@@ -142,8 +136,14 @@ def _profile(wheelbase_m: float, v: np.ndarray, fs_hz: float) -> tuple[np.ndarra
         t = np.arange(v.size) / fs_hz
         v_front = np.interp(t - tau, t, v)
         keep &= np.abs(v / np.maximum(v_front, 1e-9) - 1.0) <= STRETCH
-    tau.flags.writeable = keep.flags.writeable = False
-    return tau, keep
+    return _read_only((tau, keep))
+
+
+def _read_only(pair: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """``pair``'s arrays, no longer writeable: a kept result is shared (:class:`Kept`)."""
+    for a in pair:
+        a.flags.writeable = False
+    return pair
 
 
 def steady_window(accel: np.ndarray, wheelbase_m: float, speed_mps: float | np.ndarray,
@@ -257,6 +257,7 @@ class TrackMixture:
             np.ones((f.size, tau.size))
         self.omega, self.tau, self._f, self._track = omega, tau, f, (track_m, wheelbase_m)
         self.weights = band * p  # (F, K)
+        self.phase = _phases(omega, tau)  # (F, K) e^(-iωτ) of each bin
         self.share, self.phi = self.weights.sum(axis=1), np.einsum("fk,fk->f", self.weights, self.phase)
 
     @functools.cached_property
@@ -264,11 +265,6 @@ class TrackMixture:
         """(F, K) ``2π n B`` of each bin (built when the tracks' coherence first needs it)."""
         track_m, wheelbase_m = self._track
         return 2.0 * np.pi * self._f[:, None] * track_m * self.tau[None, :] / wheelbase_m
-
-    @functools.cached_property
-    def phase(self) -> np.ndarray:
-        """(F, K) ``e^(-iωτ)`` of each bin (:func:`_phases`)."""
-        return _phases(self.omega, self.tau)
 
     def parts(self, groups: np.ndarray, scale: float | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """The road of each group of delay bins alone, weighted as in the whole (the drive's
